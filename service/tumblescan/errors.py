@@ -1,0 +1,57 @@
+"""Input errors: one ``ValueError`` subclass per problem, each naming what is wrong.
+
+``code`` is a stable machine-readable name (the API returns it); ``field`` names the input
+field at fault where there is one.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad input to Tumblescan; the message says what and where."""
+
+    code = "invalid_input"
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+class MalformedInputError(InputError):
+    code = "malformed_input"
+
+
+class UnknownFieldError(InputError):
+    code = "unknown_field"
+
+
+class NonFiniteValueError(InputError):
+    code = "non_finite_value"
+
+
+class TooFewFramesError(InputError):
+    code = "too_few_frames"
+
+
+class TooFewTracksError(InputError):
+    code = "too_few_tracks"
+
+
+class DuplicateObservationError(InputError):
+    code = "duplicate_observation"
+
+
+class SingleObservationTrackError(InputError):
+    code = "single_observation_track"
+
+
+class TimeOrderError(InputError):
+    code = "time_out_of_order"
+
+
+class MissingTimeError(InputError):
+    code = "missing_time"
+
+
+class InvalidOptionError(InputError):
+    code = "invalid_option"

@@ -1,0 +1,175 @@
+"""One model fitted to tracks by Levenberg-Marquardt, with outlier rejection and covariance.
+
+Outliers: after each solve an observation whose whitened squared residual exceeds
+``chi2.isf(1e-6, 3)`` times the robust noise scale ``median(e) / chi2.median(3)`` is
+rejected and the fit repeated (at most ``MAX_REJECTION_ROUNDS`` times, never more than
+``MAX_OUTLIER_FRACTION`` of the data). Rejected observations are counted, never hidden.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+from scipy.optimize import least_squares
+
+from .motion import canonical_params, predict
+from .objective import ALL_FREE, SPIN_ONLY_FREE, MLProblem, PairwiseProblem, body_positions
+from .sensor import SensorNoise
+from .tracks import Tracks
+from .uncertainty import covariance, embed
+
+FloatArray = NDArray[np.float64]
+Objective = Literal["ml", "pairwise"]
+
+LM_TOL = 1e-15  # drive noise-free problems to rounding level
+# Gauss-Newton converges in a handful of steps here; more means a flat valley (a wrong model).
+MAX_NFEV = 200
+MAX_REJECTION_ROUNDS = 3
+MAX_OUTLIER_FRACTION = 0.2
+OUTLIER_TAIL = 1e-6
+# Whitened residuals below this scale are rounding, not noise (noise-free data).
+SCALE_FLOOR = 1e-12
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fitted model: canonical 9-vector, unscaled 9x9 covariance, fit statistics.
+
+    chi2: whitened sum of squares; dof: residuals minus unknowns; noise_scale:
+    ``sqrt(chi2 / dof)`` (1 when the declared noise is right); rms_m: RMS position residual;
+    keep: which observations were used (the rest were rejected as outliers).
+    """
+
+    x: FloatArray
+    body_m: FloatArray
+    free: tuple[int, ...]
+    cov: FloatArray
+    chi2: float
+    dof: int
+    noise_scale: float
+    rms_m: float
+    iterations: int
+    keep: NDArray[np.bool_]
+
+    @property
+    def spin_only(self) -> bool:
+        return self.free == SPIN_ONLY_FREE
+
+    @property
+    def outliers(self) -> int:
+        return int((~self.keep).sum())
+
+    def scaled_cov(self) -> FloatArray:
+        return self.cov * self.noise_scale**2
+
+
+def fit_model(
+    tracks: Tracks,
+    x0: FloatArray,
+    *,
+    spin_only: bool,
+    objective: Objective,
+    noise: SensorNoise,
+    reference_time_s: float,
+    gauge_point: FloatArray | None = None,
+    keep: NDArray[np.bool_] | None = None,
+    reject_outliers: bool = True,
+) -> Fit:
+    """Fit from start ``x0``; spin-only fixes ``w_p = 0`` and pins the centre on the axis
+    nearest ``gauge_point`` (default: the features' centroid at the start)."""
+    free = SPIN_ONLY_FREE if spin_only else ALL_FREE
+    base = np.asarray(x0, dtype=float).copy()
+    keep = np.ones(len(tracks), bool) if keep is None else keep.copy()
+    if spin_only:
+        base[3:6] = 0.0
+        if gauge_point is None:
+            gauge_point = body_positions(base, tracks.select(keep), reference_time_s).mean(axis=0)
+    x, iterations = base, 0
+    for _ in range(MAX_REJECTION_ROUNDS + 1):
+        used = tracks.select(keep)
+        x, nfev = _solve(used, x, free, objective, noise, reference_time_s, gauge_point)
+        iterations += nfev
+        problem = MLProblem(used, noise, reference_time_s, free=free, base=x, gauge_point=gauge_point)
+        z = problem.initial(x)
+        if objective == "ml":
+            z, nfev = _lm(problem, z)
+            iterations += nfev
+            x = problem.unpack(z)[0]
+        new_outliers = _outliers(problem, z) if reject_outliers else np.zeros(len(used), bool)
+        if not new_outliers.any() or (~keep).sum() + new_outliers.sum() > MAX_OUTLIER_FRACTION * len(tracks):
+            break
+        idx = np.flatnonzero(keep)
+        keep[idx[new_outliers]] = False
+    return _finish(problem, z, free, keep, iterations)
+
+
+def _solve(
+    tracks: Tracks,
+    x: FloatArray,
+    free: tuple[int, ...],
+    objective: Objective,
+    noise: SensorNoise,
+    reference_time_s: float,
+    gauge_point: FloatArray | None,
+) -> tuple[FloatArray, int]:
+    """Pairwise objective: LM over the motion. ML: nothing here (solved jointly with P_j)."""
+    if objective == "ml":
+        return x, 0
+    pair = PairwiseProblem(tracks, reference_time_s, free=free, base=x)
+    res = least_squares(pair.residuals, x[list(free)], jac=pair.jacobian, method="lm", xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=MAX_NFEV)
+    out = x.copy()
+    out[list(free)] = res.x
+    return out, int(res.nfev)
+
+
+def _lm(problem: MLProblem | PairwiseProblem, z0: FloatArray) -> tuple[FloatArray, int]:
+    res = least_squares(problem.residuals, z0, jac=problem.jacobian, method="lm", xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=MAX_NFEV)
+    return np.asarray(res.x, dtype=float), int(res.nfev)
+
+
+def _outliers(problem: MLProblem, z: FloatArray) -> NDArray[np.bool_]:
+    r = problem.residuals(z)[: 3 * len(problem.tracks)].reshape(-1, 3)
+    e = np.sum(r**2, axis=1)
+    scale = max(float(np.median(e)) / stats.chi2.median(3), SCALE_FLOOR)
+    return np.asarray(e > scale * stats.chi2.isf(OUTLIER_TAIL, 3))
+
+
+def _finish(problem: MLProblem, z: FloatArray, free: tuple[int, ...], keep: NDArray[np.bool_], iterations: int) -> Fit:
+    x, body = problem.unpack(z)
+    r = problem.residuals(z)
+    J = problem.jacobian(z)
+    n_obs = len(problem.tracks)
+    dof = max(len(r) - J.shape[1] - (problem.gauge_point is not None), 1)
+    chi2 = float(r @ r)
+    pos_err = _position_residuals(problem, z)
+    cov9 = embed(covariance(J, len(free)), free)
+    return Fit(
+        x=canonical_params(x),
+        body_m=body,
+        free=free,
+        cov=_canonical_cov(x, cov9),
+        chi2=chi2,
+        dof=dof,
+        noise_scale=float(np.sqrt(chi2 / dof)),
+        rms_m=float(np.sqrt(np.mean(np.sum(pos_err**2, axis=1)))) if n_obs else 0.0,
+        iterations=iterations,
+        keep=keep,
+    )
+
+
+def _position_residuals(problem: MLProblem, z: FloatArray) -> FloatArray:
+    x, body = problem.unpack(z)
+    return np.asarray(predict(x, body[problem.tracks.track], problem.tau) - problem.tracks.xyz_m)
+
+
+def _canonical_cov(x: FloatArray, cov9: FloatArray) -> FloatArray:
+    """Covariance after :func:`canonical_params`, whose Jacobian is diagonal with entries
+    +-1 (axis flips negate ``b`` and ``w``); the signs are read off a tiny step."""
+    h = 1e-6
+    step = canonical_params(x + h) - canonical_params(x)
+    sign = np.sign(np.mod(step + np.pi, 2 * np.pi) - np.pi)
+    return np.asarray(cov9 * np.outer(sign, sign), dtype=float)

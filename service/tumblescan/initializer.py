@@ -1,0 +1,169 @@
+"""Closed-form cone initializer (method.md section 5, beyond the paper).
+
+For frames taken at ``t_k`` and ``t_k + dt`` the inter-frame rotation is
+
+    R_k = R(t_k + dt) R(t_k)^T = Rp(dt) Rot(l_s(t_k), w_s dt)
+
+and ``R_{k+1} = Rp(dt) R_k Rp(dt)^T``: the rotation axes of successive ``R_k`` sweep a cone
+about ``l_p`` at ``w_p`` with a constant rotation angle. So:
+
+1. ``R_k, t_k`` from a rigid (Kabsch) fit of the features shared by frames ``k, k+1``;
+2. ``l_p`` = normal of the plane through the axis tips, ``w_p`` = their angular step / dt;
+3. ``Rot(l_s(t_k), w_s dt) = Rp(dt)^T R_k`` gives ``l_s(t_k)`` (mapped back to ``T``) and ``w_s``;
+4. ``O_p`` from ``t_k = (I - R_k) O_p`` by linear least squares.
+
+A line-scan frame is not a snapshot: its features are seen at different times. Each pass
+therefore re-times every observation to its frame's mean time with the previous estimate
+(``transport``) and repeats the four steps; a few passes converge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .motion import angles_from_axis, rotate, rotation_matrix, transport
+from .tracks import Tracks
+
+FloatArray = NDArray[np.float64]
+
+RETIME_PASSES = 4
+# Below this spread of the rotation-axis tips (radians) the cone has collapsed: no
+# precession is visible and the spin-only start is used.
+MIN_CONE_SPREAD_RAD = 1e-6
+
+
+class InitializerFailed(RuntimeError):
+    """The data do not support the closed-form start (too few shared features, a degenerate cone)."""
+
+
+@dataclass(frozen=True)
+class InitialGuess:
+    """Starting values: the full 9-vector and the spin-only 9-vector (precession rate 0)."""
+
+    x: FloatArray
+    x_spin_only: FloatArray
+    cone_collapsed: bool
+    passes: int
+
+
+def kabsch(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """Rigid ``b ~ R a + t`` by SVD; returns ``R, t`` and the RMS misfit in metres."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    H = (a - ca).T @ (b - cb)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T))
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    t = cb - R @ ca
+    rms = float(np.sqrt(np.mean(np.sum((a @ R.T + t - b) ** 2, axis=1))))
+    return R, t, rms
+
+
+def axis_angle(R: FloatArray) -> tuple[FloatArray, float]:
+    """Unit axis and angle in ``[0, pi]`` of a rotation matrix."""
+    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    n = np.linalg.norm(w)
+    if n < 1e-12:
+        # Near 0 or pi: the axis is the eigenvector of the largest diagonal of R + I.
+        S = R + np.eye(3)
+        axis = S[:, int(np.argmax(np.diag(S)))]
+        return axis / np.linalg.norm(axis), angle
+    return w / n, angle
+
+
+def _frame_pairs(tracks: Tracks, xyz: FloatArray) -> list[tuple[int, FloatArray, FloatArray]]:
+    """For each frame pair (k, k+1) with >= 3 shared tracks: (k, positions in k, in k+1)."""
+    pairs = []
+    n_f = tracks.n_frames
+    table = np.full((n_f, tracks.n_tracks), -1)
+    table[tracks.frame, tracks.track] = np.arange(len(tracks))
+    for k in range(n_f - 1):
+        shared = (table[k] >= 0) & (table[k + 1] >= 0)
+        if shared.sum() >= 3:
+            pairs.append((k, xyz[table[k, shared]], xyz[table[k + 1, shared]]))
+    return pairs
+
+
+def cone_initial(tracks: Tracks, reference_time_s: float) -> InitialGuess:
+    """Closed-form starting values for the 9 motion parameters (see the module docstring)."""
+    t_frame = tracks.frame_times_s()
+    xyz = tracks.xyz_m
+    x: FloatArray | None = None
+    guess: InitialGuess | None = None
+    for p in range(RETIME_PASSES):
+        if x is not None:
+            # Re-time every observation to its frame's mean time with the current estimate.
+            xyz = np.asarray(
+                transport(x, tracks.xyz_m, tracks.t_s - reference_time_s, t_frame[tracks.frame] - reference_time_s)
+            )
+        guess = _one_pass(tracks, xyz, t_frame, reference_time_s, passes=p + 1)
+        x = guess.x
+    assert guess is not None
+    return guess
+
+
+def _one_pass(tracks: Tracks, xyz: FloatArray, t_frame: FloatArray, reference_time_s: float, passes: int) -> InitialGuess:
+    pairs = _frame_pairs(tracks, xyz)
+    if len(pairs) < 3:
+        raise InitializerFailed(f"only {len(pairs)} frame pair(s) share 3 or more features; the cone needs 3")
+    fits = [kabsch(a, b) for _, a, b in pairs]
+    ks = np.array([k for k, _, _ in pairs])
+    t_k = t_frame[ks]
+    dt = t_frame[ks + 1] - t_k
+    Rs = np.array([f[0] for f in fits])
+    ts = np.array([f[1] for f in fits])
+    axes = np.array([axis_angle(R)[0] for R in Rs])
+    angles = np.array([axis_angle(R)[1] for R in Rs])
+    center = _center(Rs, ts)
+    x_spin = _spin_only(axes, angles, dt, center)
+
+    # 2. Precession axis: normal of the plane through the tips of the rotation axes.
+    tips = axes - axes.mean(axis=0)
+    spread = float(np.sqrt(np.mean(np.sum(tips**2, axis=1))))
+    if spread < MIN_CONE_SPREAD_RAD:
+        return InitialGuess(x=_with_small_precession(x_spin), x_spin_only=x_spin, cone_collapsed=True, passes=passes)
+    l_p = np.linalg.svd(tips)[2][-1]
+    # 2b. Precession rate: signed step of the tips about l_p per second.
+    proj = axes - np.outer(axes @ l_p, l_p)
+    a, b = proj[:-1], proj[1:]
+    step = np.arctan2(np.cross(a, b) @ l_p, np.sum(a * b, axis=1))
+    gap = t_k[1:] - t_k[:-1]
+    w_p = float(np.sum(step * gap) / np.sum(gap**2))
+    # 3. Spin: remove the precession step from each R_k, map the spin axis back to T.
+    spin_axes = []
+    spin_rates = []
+    for R, tk, d in zip(Rs, t_k, dt, strict=True):
+        l_s_k, ang = axis_angle(rotation_matrix(l_p, -w_p * d) @ R)
+        spin_axes.append(rotate(l_p, -w_p * (tk - reference_time_s), l_s_k))
+        spin_rates.append(ang / d)
+    spin_axes_a = np.array(spin_axes)
+    # Sign-align before averaging: axis-angle extraction returns angles in [0, pi].
+    spin_axes_a *= np.sign(spin_axes_a @ spin_axes_a[0])[:, None]
+    l_s = spin_axes_a.mean(axis=0)
+    a_s, b_s = angles_from_axis(l_s)
+    a_p, b_p = angles_from_axis(l_p)
+    x = np.array([a_s, b_s, float(np.median(spin_rates)), a_p, b_p, w_p, *center])
+    return InitialGuess(x=x, x_spin_only=x_spin, cone_collapsed=False, passes=passes)
+
+
+def _center(Rs: FloatArray, ts: FloatArray) -> FloatArray:
+    """``O_p`` from ``t_k = (I - R_k) O_p`` (minimum-norm when the axes are all parallel)."""
+    A = (np.eye(3) - Rs).reshape(-1, 3)
+    return np.asarray(np.linalg.lstsq(A, ts.reshape(-1), rcond=None)[0], dtype=float)
+
+
+def _spin_only(axes: FloatArray, angles: FloatArray, dt: FloatArray, center: FloatArray) -> FloatArray:
+    aligned = axes * np.sign(axes @ axes[0])[:, None]
+    a_s, b_s = angles_from_axis(aligned.mean(axis=0))
+    return np.array([a_s, b_s, float(np.median(angles / dt)), 0.0, 0.0, 0.0, *center])
+
+
+def _with_small_precession(x_spin: FloatArray) -> FloatArray:
+    """A full-model start near a pure spin: precession axis across the spin axis, rate ~0."""
+    x = x_spin.copy()
+    x[3], x[4] = x[0] + np.pi / 2, np.pi / 2
+    x[5] = 1e-3
+    return x

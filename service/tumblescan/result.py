@@ -1,0 +1,92 @@
+"""The motion result: the contract the CLI, the API and the client all return."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .motion import Motion
+
+Vec3 = tuple[float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SpinPublic(_Strict):
+    axis: Vec3 = Field(description="unit spin axis at the reference time, sensor frame")
+    alpha_deg: float
+    beta_deg: float
+    rate_deg_s: float = Field(ge=0)
+
+
+class PrecessionPublic(_Strict):
+    axis: Vec3 | None = Field(description="unit precession axis; null for the spin-only model")
+    alpha_deg: float | None
+    beta_deg: float | None
+    rate_deg_s: float = Field(ge=0, description="0 for the spin-only model")
+    center_m: Vec3 = Field(
+        description="precession centre; for spin-only, the point of the spin axis nearest the features' centroid"
+    )
+
+
+class UncertaintyPublic(_Strict):
+    """1-sigma from the covariance of the maximum-likelihood fit; axes as total angular sigma."""
+
+    spin_axis_deg: float
+    spin_rate_deg_s: float
+    precession_axis_deg: float | None
+    precession_rate_deg_s: float
+    center_m: Vec3
+
+
+class FitPublic(_Strict):
+    rms_residual_m: float
+    observations: int = Field(description="all observations given, outliers included")
+    tracks: int
+    frames: int
+    outliers: int = Field(0, description="observations rejected as outliers (counted in observations)")
+
+
+class ValidationPublic(_Strict):
+    """Two-frame-count similarity check (paper eq. 11)."""
+
+    passed: bool
+    frames: tuple[int, int]
+    distance: float | None
+    threshold: float | None
+    test: Literal["fixed", "covariance", "skipped"] = "fixed"
+
+
+class SolverPublic(_Strict):
+    path: str
+    iterations: int
+    attempts: int
+    elapsed_s: float
+
+
+class MotionResult(_Strict):
+    model: Literal["spin-precession", "spin-only"]
+    reference_time_s: float
+    spin: SpinPublic
+    precession: PrecessionPublic
+    nutation_angle_deg: float | None = Field(description="angle between the axes; null for spin-only")
+    uncertainty: UncertaintyPublic
+    fit: FitPublic
+    validation: ValidationPublic
+    solver: SolverPublic
+    warnings: list[str] = Field(default_factory=list)
+
+    def motion(self) -> Motion:
+        """The estimated motion, for rectification (spin-only: no precession)."""
+        axis = self.precession.axis or (0.0, 0.0, 1.0)
+        return Motion.from_degrees(
+            spin_axis=self.spin.axis,
+            spin_rate_deg_s=self.spin.rate_deg_s,
+            precession_axis=axis,
+            precession_rate_deg_s=self.precession.rate_deg_s if self.precession.axis else 0.0,
+            center_m=self.precession.center_m,
+            reference_time_s=self.reference_time_s,
+        )

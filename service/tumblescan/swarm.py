@@ -1,0 +1,191 @@
+"""Particle swarm search for the general case (method.md section 4), vectorized over particles.
+
+Fitness is the paper's pairwise cost (eq. 10) over the six rotational parameters
+``(a_s, b_s, w_s, a_p, b_p, w_p)``. The centre ``O_p`` enters linearly: with
+``Q_i = R(t_{i+1}) R(t_i)^T`` each pair gives ``(I - Q_i) O_p = y_{i+1} - Q_i y_i``, so every
+particle's best centre is one 3x3 solve (variable projection) and the swarm searches 6
+dimensions instead of 9.
+
+All variants move particles by
+
+    v <- w v + c1 r1 (pbest - x) + c2 r2 (gbest - x),   x <- x + v
+
+with ``r1, r2 ~ U(0, 1)`` per dimension, ``|v|`` capped at 20 % of each dimension's range,
+azimuths wrapped and the other dimensions reflected at the bounds. They differ in ``w``,
+``c1`` and ``c2`` (``s = iteration / (iterations - 1)``):
+
+- ``pso``: inertia PSO, Shi & Eberhart (1998): ``w = 0.9 - 0.5 s``, ``c1 = c2 = 2``.
+- ``tvac``: time-varying acceleration coefficients, Ratnaweera, Halgamuge & Watson (2004):
+  ``w = 0.9 - 0.5 s``, ``c1 = 2.5 - 2 s``, ``c2 = 0.5 + 2 s``.
+- ``apso``: adaptive PSO, Zhan, Zhang, Li & Chung (2009): evolutionary factor
+  ``f = (d_g - d_min) / (d_max - d_min)`` from each particle's mean normalized distance to the
+  others, ``w = 1 / (1 + 1.5 exp(-2.6 f))``; the state from ``f`` (crisp thresholds 0.25, 0.5,
+  0.75 in place of the paper's fuzzy sets: convergence, exploitation, exploration, jumping
+  out) moves ``c1, c2`` by ``delta ~ U(0.05, 0.1)`` (``+0.5d,+0.5d``; ``+0.5d,-0.5d``;
+  ``+d,-d``; ``-d,+d``), clamped to ``[1.5, 2.5]`` and rescaled to sum at most 4. The
+  elitist learning step is not implemented.
+- ``naiwpso``: adaptive inertia from the success rate, Nickabadi, Ebadzadeh & Safabakhsh
+  (2011) ``w = (w_max - w_min) S + w_min`` with ``w_max = 1, w_min = 0``, where, as
+  method.md prescribes for NAIWPSO (Li Xuejun et al. 2016), a particle succeeds when its new
+  fitness beats the previous global best; ``c1 = c2 = 1.49445``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from .motion import N_PARAMS, axis_from_angles, rotation_matrix
+from .objective import consecutive_pairs
+from .tracks import Tracks
+
+FloatArray = NDArray[np.float64]
+Variant = Literal["pso", "tvac", "apso", "naiwpso"]
+VARIANTS: tuple[Variant, ...] = ("pso", "tvac", "apso", "naiwpso")
+
+
+class SwarmConfig(BaseModel):
+    """Swarm size, length, variant and the rate bounds it searches (degrees per second)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    variant: Variant = "naiwpso"
+    particles: int = Field(100, ge=4, le=10_000)
+    iterations: int = Field(35, ge=1, le=10_000)
+    spin_rate_deg_s: tuple[float, float] = (0.0, 60.0)
+    precession_rate_deg_s: tuple[float, float] = (0.0, 30.0)
+
+
+@dataclass(frozen=True)
+class SwarmResult:
+    """Best 9-vector found, its pairwise cost (m^2) and the best cost after each iteration."""
+
+    x: FloatArray
+    cost: float
+    history: FloatArray
+
+
+class PairwiseFitness:
+    """Vectorized pairwise cost of many rotational parameter sets with the best centre each."""
+
+    def __init__(self, tracks: Tracks, reference_time_s: float) -> None:
+        first, second = consecutive_pairs(tracks)
+        tau = tracks.t_s - reference_time_s
+        self.tau1, self.tau2 = tau[first], tau[second]
+        self.y1, self.y2 = tracks.xyz_m[first], tracks.xyz_m[second]
+
+    def __call__(self, rot: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Cost ``(k,)`` and best centre ``(k, 3)`` for rotational parameters ``(k, 6)``."""
+        l_s = axis_from_angles(rot[:, 0], rot[:, 1])[:, None, :]
+        l_p = axis_from_angles(rot[:, 3], rot[:, 4])[:, None, :]
+        w_s, w_p = rot[:, [2]], rot[:, [5]]
+        # Q = R(t2) R(t1)^T = Rp(t2) Rs(t2 - t1) Rp(t1)^T
+        Q = (
+            rotation_matrix(l_p, w_p * self.tau2)
+            @ rotation_matrix(l_s, w_s * (self.tau2 - self.tau1))
+            @ rotation_matrix(l_p, -w_p * self.tau1)
+        )  # (k, n, 3, 3)
+        k, n = Q.shape[:2]
+        b = (self.y2 - (Q @ self.y1[:, :, None])[..., 0]).reshape(k, 3 * n, 1)
+        A = (np.eye(3) - Q).reshape(k, 3 * n, 3)
+        At = A.transpose(0, 2, 1)
+        AtA = At @ A
+        # A tiny ridge keeps the all-parallel-axes case (pure spin) solvable.
+        ridge = 1e-9 * np.trace(AtA, axis1=1, axis2=2)[:, None, None] * np.eye(3) + 1e-12 * np.eye(3)
+        center = np.linalg.solve(AtA + ridge, At @ b)
+        r = A @ center - b
+        center = center[..., 0]
+        return np.sum(r[..., 0] ** 2, axis=1), center
+
+
+def swarm_search(
+    tracks: Tracks, reference_time_s: float, config: SwarmConfig, rng: np.random.Generator
+) -> SwarmResult:
+    """Run the configured swarm variant; see the module docstring for the update rules."""
+    fitness = PairwiseFitness(tracks, reference_time_s)
+    lo, hi = _bounds(config)
+    span = hi - lo
+    k, dims = config.particles, len(lo)
+    # Axes uniform on the sphere, rates uniform in their bounds.
+    pos = lo + rng.random((k, dims)) * span
+    pos[:, [1, 4]] = np.arccos(rng.uniform(-1, 1, (k, 2)))
+    vel = (rng.random((k, dims)) - 0.5) * 0.2 * span
+    cost, _ = fitness(pos)
+    pbest, pbest_cost = pos.copy(), cost.copy()
+    g = int(np.argmin(cost))
+    c1, c2 = (1.49445, 1.49445) if config.variant == "naiwpso" else (2.0, 2.0)
+    w = 0.9
+    history = np.empty(config.iterations)
+    for it in range(config.iterations):
+        s = it / max(config.iterations - 1, 1)
+        # Coefficients for this step, per variant.
+        if config.variant in ("pso", "tvac"):
+            w = 0.9 - 0.5 * s
+            if config.variant == "tvac":
+                c1, c2 = 2.5 - 2.0 * s, 0.5 + 2.0 * s
+        elif config.variant == "apso":
+            w, c1, c2 = _apso_coefficients(pos, g, span, c1, c2, rng)
+        # Move.
+        r1, r2 = rng.random((2, k, dims))
+        vel = w * vel + c1 * r1 * (pbest - pos) + c2 * r2 * (pbest[g] - pos)
+        vel = np.clip(vel, -0.2 * span, 0.2 * span)
+        pos, vel = _keep_in_bounds(pos + vel, vel, lo, hi)
+        # Evaluate and update the memories.
+        cost, _ = fitness(pos)
+        if config.variant == "naiwpso":
+            w = float(np.mean(cost < pbest_cost[g]))
+        better = cost < pbest_cost
+        pbest[better], pbest_cost[better] = pos[better], cost[better]
+        g = int(np.argmin(pbest_cost))
+        history[it] = pbest_cost[g]
+    best_cost, center = fitness(pbest[g][None, :])
+    x = np.concatenate([pbest[g], center[0]])
+    assert x.shape == (N_PARAMS,)
+    return SwarmResult(x=x, cost=float(best_cost[0]), history=history)
+
+
+def _bounds(config: SwarmConfig) -> tuple[FloatArray, FloatArray]:
+    ws = np.radians(config.spin_rate_deg_s)
+    wp = np.radians(config.precession_rate_deg_s)
+    lo = np.array([-np.pi, 0.0, ws[0], -np.pi, 0.0, wp[0]])
+    hi = np.array([np.pi, np.pi, ws[1], np.pi, np.pi, wp[1]])
+    return lo, hi
+
+
+def _keep_in_bounds(pos: FloatArray, vel: FloatArray, lo: FloatArray, hi: FloatArray) -> tuple[FloatArray, FloatArray]:
+    span = hi - lo
+    for d in (0, 3):  # azimuths are periodic
+        pos[:, d] = lo[d] + np.mod(pos[:, d] - lo[d], span[d])
+    for d in (1, 2, 4, 5):  # polar angles and rates reflect
+        below, above = pos[:, d] < lo[d], pos[:, d] > hi[d]
+        pos[below, d] = 2 * lo[d] - pos[below, d]
+        pos[above, d] = 2 * hi[d] - pos[above, d]
+        pos[:, d] = np.clip(pos[:, d], lo[d], hi[d])
+        vel[below | above, d] *= -1
+    return pos, vel
+
+
+def _apso_coefficients(
+    pos: FloatArray, g: int, span: FloatArray, c1: float, c2: float, rng: np.random.Generator
+) -> tuple[float, float, float]:
+    z = pos / span
+    d = np.linalg.norm(z[:, None, :] - z[None, :, :], axis=-1).sum(axis=1) / (len(z) - 1)
+    f = float((d[g] - d.min()) / max(d.max() - d.min(), 1e-12))
+    w = 1.0 / (1.0 + 1.5 * np.exp(-2.6 * f))
+    delta = rng.uniform(0.05, 0.1)
+    if f < 0.25:  # convergence
+        c1, c2 = c1 + 0.5 * delta, c2 + 0.5 * delta
+    elif f < 0.5:  # exploitation
+        c1, c2 = c1 + 0.5 * delta, c2 - 0.5 * delta
+    elif f < 0.75:  # exploration
+        c1, c2 = c1 + delta, c2 - delta
+    else:  # jumping out
+        c1, c2 = c1 - delta, c2 + delta
+    c1, c2 = float(np.clip(c1, 1.5, 2.5)), float(np.clip(c2, 1.5, 2.5))
+    if c1 + c2 > 4.0:
+        c1, c2 = 4.0 * c1 / (c1 + c2), 4.0 * c2 / (c1 + c2)
+    return w, c1, c2

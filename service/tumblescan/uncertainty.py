@@ -1,0 +1,100 @@
+"""Covariance of a fit, the sigmas it implies, and the two-frame-count similarity test.
+
+The covariance of the maximum-likelihood fit is ``s^2 (J^T J)^-1`` with ``J`` the whitened
+Jacobian at the solution and ``s^2 = chi^2 / (m - p)`` (so a misdeclared noise level is
+corrected by the data). At the true parameters with ``s = 1`` it is the Cramer-Rao bound.
+
+Similarity (paper eq. 11): solutions ``X1`` (all frames) and ``X2`` (the first frames) are
+compared through ``g(x) = (l_s, w_s, l_p, w_p, O_p)`` (axes as vectors, so poles and the
+azimuth wrap do not matter). Noise-free data use the paper's ``||g1 - g2|| < 1e-3``. With
+noise, ``X2`` uses a subset of ``X1``'s data, so ``Cov(X2 - X1) = Sigma2 - Sigma1`` (a
+Hausman test) and ``d^2 = dg^T (G (Sigma2 - Sigma1) G^T)^+ dg`` is chi-square with as
+many degrees of freedom as the retained rank.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from .motion import N_PARAMS, axis_from_angles
+from .objective import complex_step
+
+FloatArray = NDArray[np.float64]
+
+PAPER_EPS = 1e-3
+# Below this fitted noise scale (in units of the declared sigma) data count as noise-free.
+NOISE_FREE_SCALE = 1e-6
+
+
+def covariance(J: FloatArray, n_params: int) -> FloatArray:
+    """``(J^T J)^+`` restricted to the first ``n_params`` unknowns (pseudo-inverse by SVD)."""
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > s[0] * 1e-12
+    V = Vt[keep].T[:n_params]
+    return np.asarray((V / s[keep] ** 2) @ V.T, dtype=float)
+
+
+def embed(cov_free: FloatArray, free: tuple[int, ...]) -> FloatArray:
+    """A 9x9 covariance with zeros for fixed parameters."""
+    full = np.zeros((N_PARAMS, N_PARAMS))
+    idx = np.array(free)
+    full[np.ix_(idx, idx)] = cov_free
+    return full
+
+
+def axis_sigma_rad(x: FloatArray, cov9: FloatArray, a: int, b: int) -> float:
+    """Total angular 1-sigma of the axis ``(x[a], x[b])``: ``sqrt(trace(J C J^T))``."""
+    Ja = np.array([-np.sin(x[a]) * np.sin(x[b]), np.cos(x[a]) * np.sin(x[b]), 0.0])
+    Jb = np.array([np.cos(x[a]) * np.cos(x[b]), np.sin(x[a]) * np.cos(x[b]), -np.sin(x[b])])
+    Jl = np.stack([Ja, Jb], axis=1)
+    C = cov9[np.ix_([a, b], [a, b])]
+    return float(np.sqrt(max(np.trace(Jl @ C @ Jl.T), 0.0)))
+
+
+def comparison_vector(x: NDArray[np.generic], spin_only: bool) -> NDArray[np.generic]:
+    """``g(x)``: spin axis, spin rate, [precession axis, precession rate,] centre."""
+    l_s = axis_from_angles(x[..., 0], x[..., 1])
+    parts = [l_s, x[..., 2:3]]
+    if not spin_only:
+        parts += [axis_from_angles(x[..., 3], x[..., 4]), x[..., 5:6]]
+    parts.append(x[..., 6:9])
+    return np.concatenate(parts, axis=-1)
+
+
+@dataclass(frozen=True)
+class Similarity:
+    passed: bool
+    distance: float
+    threshold: float
+    test: str
+
+
+def similarity(
+    x1: FloatArray,
+    x2: FloatArray,
+    cov2: FloatArray,
+    *,
+    free: tuple[int, ...],
+    noise_scale: float,
+    alpha: float,
+) -> Similarity:
+    """Compare two canonical 9-vectors given the unscaled 9x9 covariance of the second
+    (the one from fewer frames); see the module docstring."""
+    spin_only = 5 not in free
+    dg = comparison_vector(x1, spin_only) - comparison_vector(x2, spin_only)
+    if noise_scale < NOISE_FREE_SCALE:
+        d = float(np.linalg.norm(dg))
+        return Similarity(d < PAPER_EPS, d, PAPER_EPS, "fixed")
+    G = complex_step(lambda xs: comparison_vector(xs, spin_only), x1, free).T  # (len(g), len(free))
+    idx = np.array(free)
+    C = G @ (cov2[np.ix_(idx, idx)] * noise_scale**2) @ G.T
+    lam, V = np.linalg.eigh((C + C.T) / 2)
+    keep = lam > lam.max() * 1e-9
+    proj = V[:, keep].T @ dg
+    d2 = float(np.sum(proj**2 / lam[keep]))
+    threshold = float(np.sqrt(stats.chi2.isf(alpha, int(keep.sum()))))
+    return Similarity(np.sqrt(d2) < threshold, float(np.sqrt(d2)), threshold, "covariance")
