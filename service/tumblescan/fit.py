@@ -25,7 +25,7 @@ from .uncertainty import covariance, embed
 FloatArray = NDArray[np.float64]
 Objective = Literal["ml", "pairwise"]
 
-LM_TOL = 1e-15  # drive noise-free problems to rounding level
+LM_TOL = 1e-10  # Gauss-Newton is quadratic on noise-free data: this still reaches rounding level
 # Gauss-Newton converges in a handful of steps here; more means a flat valley (a wrong model).
 MAX_NFEV = 200
 MAX_REJECTION_ROUNDS = 3

@@ -1,0 +1,185 @@
+"""Command line: ``tumblescan simulate | estimate | rectify`` (and the service commands).
+
+Bad input exits with code 2 and one line on stderr naming the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from functools import wraps
+from pathlib import Path
+from typing import Annotated, Any, Literal, TypeVar
+
+import numpy as np
+import typer
+
+from .cloud_io import TimedCloud, read_ply, write_ply
+from .errors import InputError
+from .estimate import EstimateOptions, estimate_motion
+from .rectify import rectify as rectify_points
+from .result import MotionResult
+from .sensor import Scanner, SensorNoise
+from .simulate import Scene, random_motion, simulate_frames, simulate_tracks
+from .tracks_io import read_tracks, write_tracks
+from .truth import motion_to_json
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help="Tumbling-target motion from line-scan lidar.")
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def fail(message: str) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(code=2)
+
+
+def input_errors(fn: F) -> F:
+    """Turn bad input into exit code 2 and one line on stderr, never a traceback."""
+
+    @wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except InputError as exc:
+            raise fail(str(exc)) from None
+        except FileNotFoundError as exc:
+            raise fail(f"no such file: {exc.filename}") from None
+        except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+            raise fail(str(exc)) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+@app.command()
+@input_errors
+def simulate(
+    out: Annotated[Path, typer.Option(help="output directory")] = Path("sim"),
+    distance_m: Annotated[float, typer.Option(min=1.0, help="range to the precession centre")] = 50.0,
+    frames: Annotated[int, typer.Option(min=4, max=200)] = 15,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    spin_rate_deg_s: Annotated[float | None, typer.Option(help="default: random in 15-37")] = None,
+    precession_rate_deg_s: Annotated[float | None, typer.Option(help="default: random in 3-14")] = None,
+    noise: Annotated[bool, typer.Option(help="add Table 1 sensor noise")] = True,
+    lines: Annotated[int, typer.Option(min=2, max=8192)] = 512,
+    pixels: Annotated[int, typer.Option(min=1, max=8192)] = 512,
+    dense: Annotated[bool, typer.Option(help="also cast every ray into frames.ply")] = True,
+) -> None:
+    """Simulate a tumbling satellite: writes tracks.json, frames.ply and truth.json."""
+    rng = np.random.default_rng(seed)
+    ws = (spin_rate_deg_s, spin_rate_deg_s) if spin_rate_deg_s is not None else (15.0, 37.0)
+    wp = (precession_rate_deg_s, precession_rate_deg_s) if precession_rate_deg_s is not None else (3.0, 14.0)
+    motion = random_motion(rng, distance_m=distance_m, spin_rate_deg_s=ws, precession_rate_deg_s=wp)
+    scene = Scene(scanner=Scanner(lines=lines, pixels=pixels), frames=frames, noise=noise)
+    out.mkdir(parents=True, exist_ok=True)
+    tracks, track_truth = simulate_tracks(motion, scene, seed=seed)
+    write_tracks(out / "tracks.json", tracks)
+    truth = {"motion": motion_to_json(motion), "scene": scene.model_dump(mode="json"), "seed": seed}
+    truth["corners_reference_m"] = track_truth.corners_reference_m.tolist()
+    typer.echo(f"wrote {out / 'tracks.json'} ({len(tracks)} observations of {tracks.n_tracks} corners in {tracks.n_frames} frames)")
+    if dense:
+        cloud = simulate_frames(motion, scene, seed=seed)
+        fields = {"frame": cloud.frame, "line": cloud.line, "pixel": cloud.pixel}
+        write_ply(out / "frames.ply", TimedCloud(cloud.xyz_m, cloud.t_s, fields))
+        write_ply(out / "reference.ply", TimedCloud(cloud.reference_m, np.full(len(cloud.t_s), motion.reference_time_s), dict(fields)))
+        typer.echo(f"wrote {out / 'frames.ply'} ({len(cloud.t_s)} points) and the undistorted {out / 'reference.ply'}")
+    (out / "truth.json").write_text(json.dumps(truth, indent=2))
+    typer.echo(f"wrote {out / 'truth.json'}")
+
+
+Strategy = Literal["auto", "lm", "swarm"]
+Objective = Literal["ml", "pairwise"]
+ModelChoice = Literal["auto", "spin-precession", "spin-only"]
+
+
+@app.command()
+@input_errors
+def estimate(
+    tracks_file: Annotated[Path, typer.Argument(help="tracks as JSON or CSV")],
+    strategy: Annotated[Strategy, typer.Option()] = "auto",
+    objective: Annotated[Objective, typer.Option()] = "ml",
+    model: Annotated[ModelChoice, typer.Option()] = "auto",
+    reference_time_s: Annotated[float | None, typer.Option(help="default: first observation")] = None,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    range_sigma_m: Annotated[float | None, typer.Option(help="override the declared range noise")] = None,
+    angle_sigma_arcsec: Annotated[float | None, typer.Option(help="override the declared angle noise")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
+) -> None:
+    """Estimate the motion from feature tracks and print it."""
+    tracks = read_tracks(tracks_file)
+    sensor = None
+    if range_sigma_m is not None or angle_sigma_arcsec is not None:
+        base = tracks.sensor or SensorNoise()
+        sensor = SensorNoise(
+            range_sigma_m=range_sigma_m if range_sigma_m is not None else base.range_sigma_m,
+            angle_sigma_arcsec=angle_sigma_arcsec if angle_sigma_arcsec is not None else base.angle_sigma_arcsec,
+        )
+    options = EstimateOptions(
+        strategy=strategy, objective=objective, model=model, reference_time_s=reference_time_s, seed=seed, sensor=sensor
+    )
+    result = estimate_motion(tracks, options)
+    if as_json:
+        sys.stdout.write(result.model_dump_json() + "\n")
+    else:
+        typer.echo(format_result(result))
+
+
+@app.command()
+@input_errors
+def rectify(
+    cloud_file: Annotated[Path, typer.Argument(help="PLY with per-point times")],
+    motion: Annotated[Path, typer.Option(help="result JSON from 'estimate --json'")],
+    out: Annotated[Path, typer.Option(help="output PLY")],
+    reference_time_s: Annotated[float | None, typer.Option(help="default: the cloud's earliest time")] = None,
+) -> None:
+    """Map every point of a cloud to one reference time with an estimated motion."""
+    result = load_result(motion)
+    cloud = read_ply(cloud_file)
+    target = float(cloud.t_s.min()) if reference_time_s is None and len(cloud) else (reference_time_s or 0.0)
+    xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=target)
+    write_ply(out, TimedCloud(xyz, cloud.t_s, cloud.fields))
+    typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")
+
+
+def load_result(path: Path) -> MotionResult:
+    from pydantic import ValidationError
+
+    try:
+        return MotionResult.model_validate_json(path.read_text())
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise InputError(f"{path}: not a motion result ({'.'.join(map(str, err['loc']))}: {err['msg']})", field="motion") from None
+
+
+def format_result(r: MotionResult) -> str:
+    """A short human-readable summary with 1-sigma values."""
+    u = r.uncertainty
+    lines = [
+        f"model            {r.model}   (reference time {r.reference_time_s:.6g} s)",
+        f"spin axis        {_vec(r.spin.axis)}  +- {u.spin_axis_deg:.3g} deg",
+        f"spin rate        {r.spin.rate_deg_s:.6f} +- {u.spin_rate_deg_s:.3g} deg/s",
+    ]
+    if r.precession.axis is not None:
+        lines += [
+            f"precession axis  {_vec(r.precession.axis)}  +- {u.precession_axis_deg:.3g} deg",
+            f"precession rate  {r.precession.rate_deg_s:.6f} +- {u.precession_rate_deg_s:.3g} deg/s",
+            f"nutation angle   {r.nutation_angle_deg:.4f} deg",
+        ]
+    lines += [
+        f"centre           {_vec(r.precession.center_m)} m  +- {_vec(u.center_m, 3)}",
+        f"fit              rms {r.fit.rms_residual_m:.3g} m over {r.fit.observations} observations, "
+        f"{r.fit.tracks} tracks, {r.fit.frames} frames, {r.fit.outliers} outliers",
+        f"validation       {'passed' if r.validation.passed else 'FAILED'} ({r.validation.test}, frames {r.validation.frames})",
+        f"solver           {r.solver.path}, {r.solver.iterations} evaluations, {r.solver.attempts} attempt(s), "
+        f"{r.solver.elapsed_s * 1000:.0f} ms",
+    ]
+    lines += [f"warning          {w}" for w in r.warnings]
+    return "\n".join(lines)
+
+
+def _vec(v: Any, digits: int = 6) -> str:
+    return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
+
+
+def main() -> None:
+    app()
