@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,7 +26,16 @@ _PLY_TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
-_NP_TO_PLY = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+_NP_TO_PLY = {
+    "i1": "char",
+    "u1": "uchar",
+    "i2": "short",
+    "u2": "ushort",
+    "i4": "int",
+    "u4": "uint",
+    "f4": "float",
+    "f8": "double",
+}
 
 
 @dataclass
@@ -35,7 +45,7 @@ class TimedCloud:
 
     xyz_m: NDArray[np.float64]
     t_s: NDArray[np.float64]
-    fields: dict[str, NDArray[np.generic]] = field(default_factory=dict)
+    fields: dict[str, NDArray[Any]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -87,7 +97,8 @@ def check_line_times(cloud: TimedCloud) -> None:
     if bad.any():
         i = order[int(np.flatnonzero(bad)[0]) + 1]
         raise TimeOrderError(
-            f"times out of order within frame {frame[i]}: line {line[i]} is earlier (t={cloud.t_s[i]} s) than a previous line",
+            f"times out of order within frame {frame[i]}: line {line[i]} is earlier "
+            f"(t={cloud.t_s[i]} s) than a previous line",
             field="file",
         )
 
@@ -187,7 +198,8 @@ def _read_vertices(p: Path, h: _Header) -> np.ndarray:
     if size < need:
         have = (size - h.offset) // h.dtype.itemsize
         raise MalformedInputError(
-            f"PLY header declares {h.count} vertices but the file holds only {max(have, 0)} (truncated or lying header)",
+            f"PLY header declares {h.count} vertices but the file holds only {max(have, 0)} "
+            "(truncated or lying header)",
             field="file",
         )
     if h.count == 0:

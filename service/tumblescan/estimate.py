@@ -24,7 +24,7 @@ from scipy import stats
 
 from .errors import InvalidOptionError
 from .fit import Fit, Objective, fit_model
-from .initializer import InitializerFailed, cone_initial
+from .initializer import InitializerError, cone_initial
 from .motion import angles_from_axis, axis_from_angles
 from .result import MotionResult
 from .sensor import SensorNoise
@@ -158,12 +158,17 @@ def _attempt(
         gauge = chosen.body_m.mean(axis=0) if chosen.spin_only else None
         start = (s0_spin if s0_spin is not None else _spin_start(s0)) if chosen.spin_only else s0
         sub = fit_model(
-            sub_tracks, start, spin_only=chosen.spin_only, gauge_point=gauge, reject_outliers=opts.reject_outliers, **kw  # type: ignore[arg-type]
+            sub_tracks,
+            start,
+            spin_only=chosen.spin_only,
+            gauge_point=gauge,
+            reject_outliers=opts.reject_outliers,
+            **kw,  # type: ignore[arg-type]
         )
         check = similarity(
             chosen.x, sub.x, sub.cov, free=chosen.free, noise_scale=chosen.noise_scale, alpha=opts.significance
         )
-    except InitializerFailed as exc:
+    except InitializerError as exc:
         check = Similarity(False, float("inf"), float("nan"), "skipped")
         warnings.append(f"second solve with {n2} frames could not start: {exc}")
     return _Solution(chosen, taken, check, n2, warnings)
@@ -183,7 +188,7 @@ def _start(
         try:
             guess = cone_initial(tracks, T)
             return guess.x, guess.x_spin_only, "initializer+lm"
-        except InitializerFailed as exc:
+        except InitializerError as exc:
             if not allow_fallback:
                 raise
             warnings.append(f"closed-form initializer unavailable ({exc}); used the swarm")
@@ -206,11 +211,14 @@ def _prefer_spin_only(full: Fit, spin: Fit, alpha: float, warnings: list[str]) -
     p_value = float(stats.f.sf(num / den, extra, full.dof))
     if p_value < alpha:
         return False
-    nutation = np.degrees(np.arccos(np.clip(axis_from_angles(full.x[0], full.x[1]) @ axis_from_angles(full.x[3], full.x[4]), -1, 1)))
+    nutation = np.degrees(
+        np.arccos(np.clip(axis_from_angles(full.x[0], full.x[1]) @ axis_from_angles(full.x[3], full.x[4]), -1, 1))
+    )
     if min(nutation, 180 - nutation) < PARALLEL_AXES_DEG:
         warnings.append(
-            "spin axis parallel to the precession axis: only the sum of the rates is observable; "
-            "reporting the spin-only model with the combined rate"
+            "no precession detected, or the spin axis is parallel to the precession axis (the two cannot be told "
+            "apart: only the sum of the rates is observable); reporting the spin-only model with the total rate; "
+            "the precession axis and the centre's position along the spin axis are unobservable"
         )
     else:
         warnings.append(

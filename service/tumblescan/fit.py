@@ -2,7 +2,8 @@
 
 Outliers: after each solve an observation whose whitened squared residual exceeds
 ``chi2.isf(1e-6, 3)`` times the robust noise scale ``median(e) / chi2.median(3)`` is
-rejected and the fit repeated (at most ``MAX_REJECTION_ROUNDS`` times, never more than
+rejected (only the worst of each track per round, since a gross error drags its track's
+other residuals along) and the fit repeated (at most ``MAX_REJECTION_ROUNDS`` times, never more than
 ``MAX_OUTLIER_FRACTION`` of the data). Rejected observations are counted, never hidden.
 """
 
@@ -28,7 +29,7 @@ Objective = Literal["ml", "pairwise"]
 LM_TOL = 1e-10  # Gauss-Newton is quadratic on noise-free data: this still reaches rounding level
 # Gauss-Newton converges in a handful of steps here; more means a flat valley (a wrong model).
 MAX_NFEV = 200
-MAX_REJECTION_ROUNDS = 3
+MAX_REJECTION_ROUNDS = 5
 MAX_OUTLIER_FRACTION = 0.2
 OUTLIER_TAIL = 1e-6
 # Whitened residuals below this scale are rounding, not noise (noise-free data).
@@ -120,14 +121,32 @@ def _solve(
     if objective == "ml":
         return x, 0
     pair = PairwiseProblem(tracks, reference_time_s, free=free, base=x)
-    res = least_squares(pair.residuals, x[list(free)], jac=pair.jacobian, method="lm", xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=MAX_NFEV)
+    res = least_squares(
+        pair.residuals,
+        x[list(free)],
+        jac=pair.jacobian,
+        method="lm",
+        xtol=LM_TOL,
+        ftol=LM_TOL,
+        gtol=LM_TOL,
+        max_nfev=MAX_NFEV,
+    )
     out = x.copy()
     out[list(free)] = res.x
     return out, int(res.nfev)
 
 
 def _lm(problem: MLProblem | PairwiseProblem, z0: FloatArray) -> tuple[FloatArray, int]:
-    res = least_squares(problem.residuals, z0, jac=problem.jacobian, method="lm", xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=MAX_NFEV)
+    res = least_squares(
+        problem.residuals,
+        z0,
+        jac=problem.jacobian,
+        method="lm",
+        xtol=LM_TOL,
+        ftol=LM_TOL,
+        gtol=LM_TOL,
+        max_nfev=MAX_NFEV,
+    )
     return np.asarray(res.x, dtype=float), int(res.nfev)
 
 
@@ -135,7 +154,13 @@ def _outliers(problem: MLProblem, z: FloatArray) -> NDArray[np.bool_]:
     r = problem.residuals(z)[: 3 * len(problem.tracks)].reshape(-1, 3)
     e = np.sum(r**2, axis=1)
     scale = max(float(np.median(e)) / stats.chi2.median(3), SCALE_FLOOR)
-    return np.asarray(e > scale * stats.chi2.isf(OUTLIER_TAIL, 3))
+    suspect = e > scale * stats.chi2.isf(OUTLIER_TAIL, 3)
+    # A gross error drags its track's other observations along through P_j: blame only
+    # the worst observation of each track per round, then refit.
+    track = problem.tracks.track
+    worst = np.full(problem.tracks.n_tracks, -1.0)
+    np.maximum.at(worst, track, e)
+    return np.asarray(suspect & (e == worst[track]))
 
 
 def _finish(problem: MLProblem, z: FloatArray, free: tuple[int, ...], keep: NDArray[np.bool_], iterations: int) -> Fit:

@@ -35,7 +35,7 @@ RETIME_PASSES = 4
 MIN_CONE_SPREAD_RAD = 1e-6
 
 
-class InitializerFailed(RuntimeError):
+class InitializerError(RuntimeError):
     """The data do not support the closed-form start (too few shared features, a degenerate cone)."""
 
 
@@ -105,10 +105,12 @@ def cone_initial(tracks: Tracks, reference_time_s: float) -> InitialGuess:
     return guess
 
 
-def _one_pass(tracks: Tracks, xyz: FloatArray, t_frame: FloatArray, reference_time_s: float, passes: int) -> InitialGuess:
+def _one_pass(
+    tracks: Tracks, xyz: FloatArray, t_frame: FloatArray, reference_time_s: float, passes: int
+) -> InitialGuess:
     pairs = _frame_pairs(tracks, xyz)
     if len(pairs) < 3:
-        raise InitializerFailed(f"only {len(pairs)} frame pair(s) share 3 or more features; the cone needs 3")
+        raise InitializerError(f"only {len(pairs)} frame pair(s) share 3 or more features; the cone needs 3")
     fits = [kabsch(a, b) for _, a, b in pairs]
     ks = np.array([k for k, _, _ in pairs])
     t_k = t_frame[ks]

@@ -18,6 +18,7 @@ one call.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 N_PARAMS = 9
 PARAM_NAMES = ("a_s", "b_s", "w_s", "a_p", "b_p", "w_p", "O_x", "O_y", "O_z")
 
-Array = NDArray[np.generic]
+Array = NDArray[Any]
 
 
 def axis_from_angles(alpha_rad: ArrayLike, beta_rad: ArrayLike) -> Array:
@@ -197,9 +198,7 @@ class Motion:
         """The 9-vector ``x`` of the self-constrained parameterization."""
         a_s, b_s = angles_from_axis(self.spin_axis)
         a_p, b_p = angles_from_axis(self.precession_axis)
-        return np.array(
-            [a_s, b_s, self.spin_rate_rad_s, a_p, b_p, self.precession_rate_rad_s, *self.center_m]
-        )
+        return np.array([a_s, b_s, self.spin_rate_rad_s, a_p, b_p, self.precession_rate_rad_s, *self.center_m])
 
     def canonical(self) -> Motion:
         """The same motion with rates >= 0: ``(l, w) == (-l, -w)`` for both axes."""

@@ -17,6 +17,7 @@ the analytic ``W R``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,7 @@ def complex_step(fun: object, x: FloatArray, free: tuple[int, ...]) -> FloatArra
     """
     probes = np.tile(x.astype(complex), (len(free), 1))
     probes[np.arange(len(free)), list(free)] += 1j * STEP
-    return np.asarray(fun(probes).imag / STEP, dtype=float)  # type: ignore[operator]
+    return np.asarray(fun(probes).imag / STEP, dtype=np.float64)  # type: ignore[operator]
 
 
 def rotation_matrices(x: FloatArray, tau_s: FloatArray) -> FloatArray:
@@ -93,7 +94,7 @@ class MLProblem:
         x[list(self.free)] = z[: self.n_free]
         return x, z[self.n_free :].reshape(-1, 3)
 
-    def _gauge(self, x: NDArray[np.generic]) -> NDArray[np.generic]:
+    def _gauge(self, x: NDArray[Any]) -> NDArray[Any]:
         assert self.gauge_point is not None
         l_s = axis_from_angles(x[..., 0], x[..., 1])
         return np.asarray(np.sum(l_s * (x[..., 6:9] - self.gauge_point), axis=-1)[..., None])
@@ -144,12 +145,12 @@ class PairwiseProblem:
         self.tau1, self.tau2 = tau[self.first], tau[self.second]
         self.y1, self.y2 = self.tracks.xyz_m[self.first], self.tracks.xyz_m[self.second]
 
-    def _x(self, z: NDArray[np.generic]) -> NDArray[np.generic]:
+    def _x(self, z: NDArray[Any]) -> NDArray[Any]:
         x = np.broadcast_to(self.base, (*z.shape[:-1], N_PARAMS)).astype(z.dtype)
         x[..., list(self.free)] = z
         return x
 
-    def _predict(self, x: NDArray[np.generic]) -> NDArray[np.generic]:
+    def _predict(self, x: NDArray[Any]) -> NDArray[Any]:
         return np.asarray(transport(x, self.y1, self.tau1, self.tau2) - self.y2)
 
     def residuals(self, z: FloatArray) -> FloatArray:

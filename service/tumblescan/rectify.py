@@ -48,7 +48,9 @@ def distort(
     return _move(xyz, np.full(1, from_time_s), t, motion)
 
 
-def _move(xyz: NDArray[np.float64], t_from: NDArray[np.float64], t_to: NDArray[np.float64], motion: Motion) -> NDArray[np.float64]:
+def _move(
+    xyz: NDArray[np.float64], t_from: NDArray[np.float64], t_to: NDArray[np.float64], motion: Motion
+) -> NDArray[np.float64]:
     x = motion.params()
     T = motion.reference_time_s
     out = np.empty_like(xyz)

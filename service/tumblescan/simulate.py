@@ -103,9 +103,10 @@ def random_motion(
 def simulate_tracks(motion: Motion, scene: Scene, *, seed: int | None = 0) -> tuple[Tracks, TrackTruth]:
     """Observe the target's corners once per frame, at the time of the line crossing each.
 
-    A corner is observed in frame ``f`` at the first line ``k`` whose azimuth bin contains
-    the corner's azimuth at that line's time ``t_fk``, if its elevation is in the field of
-    view and (with ``scene.occlusion``) no surface hides it. Missing corners stay missing.
+    A corner is observed in frame ``f`` at the first line ``k`` whose azimuth bin reaches
+    the corner's azimuth at that line's time ``t_fk``, if the corner was not already behind
+    the first line, its elevation is in the field of view and (with ``scene.occlusion``) no
+    surface hides it. Missing corners stay missing.
     """
     rng = np.random.default_rng(seed)
     sc = scene.scanner
@@ -117,10 +118,16 @@ def simulate_tracks(motion: Motion, scene: Scene, *, seed: int | None = 0) -> tu
     pos = motion.position(flat_p, flat_t).reshape(*times.shape, len(corners), 3)
     az, el = azimuth_elevation(pos)
     half = np.radians(sc.fov_azimuth_deg) / sc.lines / 2
-    in_bin = np.abs(az - sc.azimuths_rad()[None, :, None]) <= half
-    in_fov = in_bin & (np.abs(el) <= np.radians(sc.fov_elevation_deg) / 2)
-    seen = in_fov.any(axis=1)  # (F, C)
-    line = np.argmax(in_fov, axis=1)  # first crossing line
+    # The sweep reaches the corner at the first line whose bin end passes it; a corner
+    # already behind the first line's bin (or never reached) is outside the field of view.
+    gap = sc.azimuths_rad()[None, :, None] + half - az  # (F, L, C)
+    reached = gap >= 0
+    line = np.argmax(reached, axis=1)  # (F, C)
+    f_all, c_all = np.indices(line.shape)
+    first_gap = gap[f_all, line, c_all]
+    el_at = el[f_all, line, c_all]
+    behind = (line == 0) & (first_gap > 2 * half)
+    seen = reached.any(axis=1) & ~behind & (np.abs(el_at) <= np.radians(sc.fov_elevation_deg) / 2)
     f_idx, c_idx = np.nonzero(seen)
     k_idx = line[f_idx, c_idx]
     t_obs = times[f_idx, k_idx]
@@ -156,7 +163,7 @@ def _cast(
     tau = t_s - motion.reference_time_s
     origin_b, dir_b = _rays_to_reference(x, tau, dir_sensor)
     scene_rc = _raycasting_scene(motion, scene)
-    rays = o3d.core.Tensor(np.hstack([origin_b, dir_b]).astype(np.float32))
+    rays = o3d.core.Tensor(np.hstack([origin_b, dir_b]).astype(np.float32))  # type: ignore[call-overload]
     hit = scene_rc.cast_rays(rays, nthreads=0)["t_hit"].numpy().astype(float)
     return np.asarray(hit, dtype=float)
 
@@ -203,7 +210,7 @@ def simulate_frames(motion: Motion, scene: Scene, *, seed: int | None = 0) -> Fr
     rays = np.empty((scene.frames, lines_per_frame, n_pix, 6), dtype=np.float32)
     rays[..., :3] = origin_b.reshape(scene.frames, lines_per_frame, 1, 3)
     rays[..., 3:] = dir_b
-    hit = _raycasting_scene(motion, scene).cast_rays(o3d.core.Tensor(rays.reshape(-1, 6)), nthreads=0)
+    hit = _raycasting_scene(motion, scene).cast_rays(o3d.core.Tensor(rays.reshape(-1, 6)), nthreads=0)  # type: ignore[call-overload]
     t_hit = hit["t_hit"].numpy().astype(float)
     ok = np.isfinite(t_hit) & (t_hit <= sc.max_range_m)
     idx = np.flatnonzero(ok)

@@ -102,9 +102,7 @@ class PairwiseFitness:
         return np.sum(r[..., 0] ** 2, axis=1), center
 
 
-def swarm_search(
-    tracks: Tracks, reference_time_s: float, config: SwarmConfig, rng: np.random.Generator
-) -> SwarmResult:
+def swarm_search(tracks: Tracks, reference_time_s: float, config: SwarmConfig, rng: np.random.Generator) -> SwarmResult:
     """Run the configured swarm variant; see the module docstring for the update rules."""
     fitness = PairwiseFitness(tracks, reference_time_s)
     lo, hi = _bounds(config)

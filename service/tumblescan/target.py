@@ -41,8 +41,7 @@ class SatelliteShape(BaseModel):
         lo, hi = boxes[0]
         bus = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         panels = [
-            np.array([[x, y, phi[2]] for x in (plo[0], phi[0]) for y in (plo[1], phi[1])])
-            for plo, phi in boxes[1:]
+            np.array([[x, y, phi[2]] for x in (plo[0], phi[0]) for y in (plo[1], phi[1])]) for plo, phi in boxes[1:]
         ]
         return np.vstack([bus, *panels])
 

@@ -21,6 +21,7 @@ distinct minima, which differ by many sigma.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,7 +62,7 @@ def axis_sigma_rad(x: FloatArray, cov9: FloatArray, a: int, b: int) -> float:
     return float(np.sqrt(max(np.trace(Jl @ C @ Jl.T), 0.0)))
 
 
-def comparison_vector(x: NDArray[np.generic], spin_only: bool) -> NDArray[np.generic]:
+def comparison_vector(x: NDArray[Any], spin_only: bool) -> NDArray[Any]:
     """``g(x)``: spin axis, spin rate, [precession axis, precession rate,] centre."""
     l_s = axis_from_angles(x[..., 0], x[..., 1])
     parts = [l_s, x[..., 2:3]]
