@@ -36,8 +36,6 @@ FloatArray = NDArray[np.float64]
 Strategy = Literal["auto", "lm", "swarm"]
 ModelChoice = Literal["auto", "spin-precession", "spin-only"]
 
-# Spin and precession axes closer than this (degrees) are reported as parallel.
-PARALLEL_AXES_DEG = 0.5
 
 
 class EstimateOptions(BaseModel):
@@ -211,20 +209,11 @@ def _prefer_spin_only(full: Fit, spin: Fit, alpha: float, warnings: list[str]) -
     p_value = float(stats.f.sf(num / den, extra, full.dof))
     if p_value < alpha:
         return False
-    nutation = np.degrees(
-        np.arccos(np.clip(axis_from_angles(full.x[0], full.x[1]) @ axis_from_angles(full.x[3], full.x[4]), -1, 1))
+    warnings.append(
+        f"no significant precession (F-test p={p_value:.3g}): reporting the spin-only model; the precession "
+        "axis and the centre's position along the spin axis are unobservable (a spin axis parallel to the "
+        "precession axis looks the same, and then the spin rate reported is the sum of both rates)"
     )
-    if min(nutation, 180 - nutation) < PARALLEL_AXES_DEG:
-        warnings.append(
-            "no precession detected, or the spin axis is parallel to the precession axis (the two cannot be told "
-            "apart: only the sum of the rates is observable); reporting the spin-only model with the total rate; "
-            "the precession axis and the centre's position along the spin axis are unobservable"
-        )
-    else:
-        warnings.append(
-            f"no significant precession (F-test p={p_value:.3g}): reporting the spin-only model; "
-            "the precession axis and the centre's position along the spin axis are unobservable"
-        )
     return True
 
 

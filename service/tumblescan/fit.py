@@ -95,11 +95,10 @@ def fit_model(
         x, nfev = _solve(used, x, free, objective, noise, reference_time_s, gauge_point)
         iterations += nfev
         problem = MLProblem(used, noise, reference_time_s, free=free, base=x, gauge_point=gauge_point)
-        z = problem.initial(x)
         if objective == "ml":
-            z, nfev = _lm(problem, z)
+            x, nfev = _lm_projected(problem, x)
             iterations += nfev
-            x = problem.unpack(z)[0]
+        z = problem.pack(x, problem.body_for(x))
         new_outliers = _outliers(problem, z) if reject_outliers else np.zeros(len(used), bool)
         if not new_outliers.any() or (~keep).sum() + new_outliers.sum() > MAX_OUTLIER_FRACTION * len(tracks):
             break
@@ -136,18 +135,22 @@ def _solve(
     return out, int(res.nfev)
 
 
-def _lm(problem: MLProblem | PairwiseProblem, z0: FloatArray) -> tuple[FloatArray, int]:
+def _lm_projected(problem: MLProblem, x0: FloatArray) -> tuple[FloatArray, int]:
+    """LM over the free motion parameters with every ``P_j`` projected out."""
+    free = list(problem.free)
     res = least_squares(
-        problem.residuals,
-        z0,
-        jac=problem.jacobian,
+        problem.reduced_residuals,
+        x0[free],
+        jac=problem.reduced_jacobian,
         method="lm",
         xtol=LM_TOL,
         ftol=LM_TOL,
         gtol=LM_TOL,
         max_nfev=MAX_NFEV,
     )
-    return np.asarray(res.x, dtype=float), int(res.nfev)
+    x = problem.base.copy()
+    x[free] = res.x
+    return x, int(res.nfev)
 
 
 def _outliers(problem: MLProblem, z: FloatArray) -> NDArray[np.bool_]:

@@ -129,6 +129,61 @@ class MLProblem:
     def initial(self, x: FloatArray) -> FloatArray:
         return self.pack(x, body_positions(x, self.tracks, self.reference_time_s))
 
+    # Variable projection: for fixed motion each P_j is a weighted linear least-squares
+    # solution, so LM can run over the motion alone (9 unknowns instead of 9 + 3m).
+    # With A_i = W_i R_i and the residual A_i P_j + W_i (c_i - y_i), c_i = (I - R_i) O:
+    #     P_j = -(sum A^T A)^-1 sum A^T W (c - y)
+    # and the Gauss-Newton Jacobian of the projected residual is Kaufman's
+    #     J = (I - A (A^T A)^-1 A^T) dr/dx, applied per track.
+
+    def _blocks(self, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``A = W R`` per kept observation, ``G_j = sum A^T A`` and the optimal ``P_j``."""
+        keep = self.keep
+        R = rotation_matrices(x, self.tau[keep])
+        A = self.W[keep] @ R
+        c = x[6:9] - np.einsum("nij,j->ni", R, x[6:9])
+        rhs = np.einsum("nij,nj->ni", self.W[keep], c - self.tracks.xyz_m[keep])
+        track = self.tracks.track[keep]
+        m = self.tracks.n_tracks
+        G = np.zeros((m, 3, 3))
+        np.add.at(G, track, A.transpose(0, 2, 1) @ A)
+        b = np.zeros((m, 3))
+        np.add.at(b, track, np.einsum("nji,nj->ni", A, rhs))
+        # Tracks with no kept observation get a harmless identity block.
+        empty = np.bincount(track, minlength=m) == 0
+        G[empty] = np.eye(3)
+        body = -np.linalg.solve(G, b[..., None])[..., 0]
+        return A, G, body
+
+    def body_for(self, x: FloatArray) -> FloatArray:
+        """The optimal ``P_j`` for motion ``x`` (full 9-vector)."""
+        return self._blocks(x)[2]
+
+    def reduced_residuals(self, xf: FloatArray) -> FloatArray:
+        x = self._x_from_free(xf)
+        return self.residuals(self.pack(x, self.body_for(x)))
+
+    def reduced_jacobian(self, xf: FloatArray) -> FloatArray:
+        x = self._x_from_free(xf)
+        A, G, body = self._blocks(x)
+        keep = self.keep
+        pts = body[self.tracks.track]
+        d_motion = complex_step(lambda xs: predict(xs, pts, self.tau), x, self.free)  # (k, N, 3)
+        Jx = np.einsum("nij,knj->nik", self.W, d_motion)[keep]  # (n, 3, k)
+        track = self.tracks.track[keep]
+        H = np.zeros((self.tracks.n_tracks, 3, self.n_free))
+        np.add.at(H, track, A.transpose(0, 2, 1) @ Jx)
+        correction = A @ np.linalg.solve(G, H)[track]
+        J = (Jx - correction).reshape(-1, self.n_free)
+        if self.gauge_point is not None:
+            J = np.vstack([J, complex_step(self._gauge, x, self.free)[:, 0][None, :]])
+        return np.asarray(J, dtype=float)
+
+    def _x_from_free(self, xf: FloatArray) -> FloatArray:
+        x = self.base.astype(float).copy()
+        x[list(self.free)] = xf
+        return x
+
 
 @dataclass
 class PairwiseProblem:
