@@ -89,7 +89,7 @@ def test_parallel_axes_are_reported_as_spin_only_with_the_summed_rate() -> None:
     r = estimate_motion(tracks)
     assert r.model == "spin-only"
     assert r.spin.rate_deg_s == pytest.approx(26.0, abs=1e-6)
-    assert any("only the sum of the rates is observable" in w for w in r.warnings)
+    assert any("sum of both rates" in w for w in r.warnings)
 
 
 def test_strong_precession_is_not_mistaken_for_spin_only() -> None:
