@@ -30,6 +30,8 @@ from .tracks import Tracks
 FloatArray = NDArray[np.float64]
 
 RETIME_PASSES = 4
+# Stop re-timing once the rotational parameters move less than this (radians, rad/s).
+RETIME_TOL = 1e-4
 # Below this spread of the rotation-axis tips (radians) the cone has collapsed: no
 # precession is visible and the spin-only start is used.
 MIN_CONE_SPREAD_RAD = 1e-6
@@ -49,16 +51,26 @@ class InitialGuess:
     passes: int
 
 
-def kabsch(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray, float]:
-    """Rigid ``b ~ R a + t`` by SVD; returns ``R, t`` and the RMS misfit in metres."""
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    H = (a - ca).T @ (b - cb)
+def kabsch(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rigid ``b ~ R a + t`` by SVD; returns ``R, t``."""
+    R, t = kabsch_batch([a], [b])
+    return R[0], t[0]
+
+
+def kabsch_batch(a: list[FloatArray], b: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """Kabsch for many point-set pairs at once (one batched SVD): ``R (P, 3, 3), t (P, 3)``."""
+    ca = np.array([p.mean(axis=0) for p in a])
+    cb = np.array([p.mean(axis=0) for p in b])
+    H = np.array([(p - c).T @ (q - d) for p, q, c, d in zip(a, b, ca, cb, strict=True)])
     U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
-    t = cb - R @ ca
-    rms = float(np.sqrt(np.mean(np.sum((a @ R.T + t - b) ** 2, axis=1))))
-    return R, t, rms
+    V = Vt.transpose(0, 2, 1)
+    d = np.sign(np.linalg.det(V @ U.transpose(0, 2, 1)))
+    D = np.zeros_like(H)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    R = V @ D @ U.transpose(0, 2, 1)
+    t = cb - np.einsum("pij,pj->pi", R, ca)
+    return R, t
 
 
 def axis_angle(R: FloatArray) -> tuple[FloatArray, float]:
@@ -100,7 +112,10 @@ def cone_initial(tracks: Tracks, reference_time_s: float) -> InitialGuess:
                 transport(x, tracks.xyz_m, tracks.t_s - reference_time_s, t_frame[tracks.frame] - reference_time_s)
             )
         guess = _one_pass(tracks, xyz, t_frame, reference_time_s, passes=p + 1)
+        converged = x is not None and np.max(np.abs(np.sin((guess.x[:6] - x[:6]) / 2))) < RETIME_TOL
         x = guess.x
+        if converged:
+            break
     assert guess is not None
     return guess
 
@@ -111,14 +126,13 @@ def _one_pass(
     pairs = _frame_pairs(tracks, xyz)
     if len(pairs) < 3:
         raise InitializerError(f"only {len(pairs)} frame pair(s) share 3 or more features; the cone needs 3")
-    fits = [kabsch(a, b) for _, a, b in pairs]
+    Rs, ts = kabsch_batch([a for _, a, _ in pairs], [b for _, _, b in pairs])
     ks = np.array([k for k, _, _ in pairs])
     t_k = t_frame[ks]
     dt = t_frame[ks + 1] - t_k
-    Rs = np.array([f[0] for f in fits])
-    ts = np.array([f[1] for f in fits])
-    axes = np.array([axis_angle(R)[0] for R in Rs])
-    angles = np.array([axis_angle(R)[1] for R in Rs])
+    axes_angles = [axis_angle(R) for R in Rs]
+    axes = np.array([aa[0] for aa in axes_angles])
+    angles = np.array([aa[1] for aa in axes_angles])
     center = _center(Rs, ts)
     x_spin = _spin_only(axes, angles, dt, center)
 

@@ -50,17 +50,17 @@ def rotate(axis: Array, angle_rad: Array, v: Array) -> Array:
     ``v' = v cos a + (l x v) sin a + l (l . v)(1 - cos a)``; shapes broadcast as
     ``axis (..., 3)``, ``angle (...)``, ``v (..., 3)``.
     """
-    c = np.cos(angle_rad)[..., None]
-    s = np.sin(angle_rad)[..., None]
-    ldotv = np.sum(axis * v, axis=-1, keepdims=True)
-    return v * c + cross(axis, v) * s + axis * ldotv * (1.0 - c)
-
-
-def cross(a: Array, b: Array) -> Array:
-    """``a x b`` over the last axis, broadcasting (cheaper than ``np.cross`` on small batches)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    c = np.cos(angle_rad)
+    s = np.sin(angle_rad)
+    lx, ly, lz = axis[..., 0], axis[..., 1], axis[..., 2]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    k = (lx * vx + ly * vy + lz * vz) * (1.0 - c)
+    x = vx * c + (ly * vz - lz * vy) * s + lx * k
+    y = vy * c + (lz * vx - lx * vz) * s + ly * k
+    z = vz * c + (lx * vy - ly * vx) * s + lz * k
+    out = np.empty((*x.shape, 3), dtype=x.dtype)
+    out[..., 0], out[..., 1], out[..., 2] = x, y, z
+    return out
 
 
 def rotation_matrix(axis: ArrayLike, angle_rad: ArrayLike) -> Array:
@@ -70,12 +70,18 @@ def rotation_matrix(axis: ArrayLike, angle_rad: ArrayLike) -> Array:
     c, s = np.cos(a), np.sin(a)
     C = 1.0 - c
     x, y, z = l[..., 0], l[..., 1], l[..., 2]
-    rows = [
-        [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
-        [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
-        [z * x * C - y * s, z * y * C + x * s, c + z * z * C],
-    ]
-    return np.stack([np.stack(np.broadcast_arrays(*r), axis=-1) for r in rows], axis=-2)
+    shape = np.broadcast_shapes(x.shape, a.shape)
+    R = np.empty((*shape, 3, 3), dtype=np.result_type(l, a, float))
+    R[..., 0, 0] = c + x * x * C
+    R[..., 0, 1] = x * y * C - z * s
+    R[..., 0, 2] = x * z * C + y * s
+    R[..., 1, 0] = y * x * C + z * s
+    R[..., 1, 1] = c + y * y * C
+    R[..., 1, 2] = y * z * C - x * s
+    R[..., 2, 0] = z * x * C - y * s
+    R[..., 2, 1] = z * y * C + x * s
+    R[..., 2, 2] = c + z * z * C
+    return R
 
 
 def _unpack(x: Array) -> tuple[Array, Array, Array, Array, Array]:
