@@ -153,7 +153,7 @@ class MLProblem:
         empty = np.bincount(track, minlength=m) == 0
         G[empty] = np.eye(3)
         body = -np.linalg.solve(G, b[..., None])[..., 0]
-        return A, G, body
+        return A, G, np.asarray(body, dtype=np.float64)
 
     def body_for(self, x: FloatArray) -> FloatArray:
         """The optimal ``P_j`` for motion ``x`` (full 9-vector)."""
