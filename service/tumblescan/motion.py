@@ -116,6 +116,13 @@ def predict(x: Array, body_m: Array, tau_s: Array) -> Array:
     return center + apply_rotation(x, tau_s, body_m - center)
 
 
+def rotation_matrices(x: NDArray[np.float64], tau_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``R(tau) = Rp(tau) Rs(tau)`` for each offset, shape ``(n, 3, 3)``."""
+    l_s = axis_from_angles(x[0], x[1])
+    l_p = axis_from_angles(x[3], x[4])
+    return np.asarray(rotation_matrix(l_p, x[5] * tau_s) @ rotation_matrix(l_s, x[2] * tau_s), dtype=float)
+
+
 def to_reference(x: Array, obs_m: Array, tau_s: Array) -> Array:
     """Backward model: positions at ``T`` of points observed at ``T + tau``.
 
@@ -215,6 +222,17 @@ class Motion:
         if w_p < 0:
             l_p, w_p = -l_p, -w_p
         return Motion(_vec3(l_s), w_s, _vec3(l_p), w_p, self.center_m, self.reference_time_s)
+
+    def at_reference(self, t_s: float) -> Motion:
+        """The same motion described with reference time ``t_s`` (spin axis taken then)."""
+        return Motion(
+            _vec3(self.spin_axis_at(t_s)),
+            self.spin_rate_rad_s,
+            self.precession_axis,
+            self.precession_rate_rad_s,
+            self.center_m,
+            float(t_s),
+        )
 
     def spin_axis_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """Spin axis at times ``t_s``: ``Rp(t) l_s``; shape ``(..., 3)``."""

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .motion import N_PARAMS, axis_from_angles, predict, rotation_matrix, to_reference, transport
+from .motion import N_PARAMS, axis_from_angles, predict, rotation_matrices, to_reference, transport
 from .sensor import SensorNoise
 from .tracks import Tracks
 
@@ -41,13 +41,6 @@ def complex_step(fun: object, x: FloatArray, free: tuple[int, ...]) -> FloatArra
     probes = np.tile(x.astype(complex), (len(free), 1))
     probes[np.arange(len(free)), list(free)] += 1j * STEP
     return np.asarray(fun(probes).imag / STEP, dtype=np.float64)  # type: ignore[operator]
-
-
-def rotation_matrices(x: FloatArray, tau_s: FloatArray) -> FloatArray:
-    """``R(tau) = Rp(tau) Rs(tau)`` for each offset, shape ``(n, 3, 3)``."""
-    l_s = axis_from_angles(x[0], x[1])
-    l_p = axis_from_angles(x[3], x[4])
-    return np.asarray(rotation_matrix(l_p, x[5] * tau_s) @ rotation_matrix(l_s, x[2] * tau_s), dtype=float)
 
 
 def body_positions(x: FloatArray, tracks: Tracks, reference_time_s: float) -> FloatArray:

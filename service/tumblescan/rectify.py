@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import MalformedInputError, NonFiniteValueError
-from .motion import Motion, transport
+from .motion import Motion, apply_rotation, rotation_matrices
 
 CHUNK = 1 << 20
 
@@ -51,14 +51,25 @@ def distort(
 def _move(
     xyz: NDArray[np.float64], t_from: NDArray[np.float64], t_to: NDArray[np.float64], motion: Motion
 ) -> NDArray[np.float64]:
+    """``O + R(t_to) R(t_from)^T (P - O)`` where one of the two times is a single value: that
+    side is one 3x3 matrix, so only the per-point side needs the Rodrigues passes."""
     x = motion.params()
     T = motion.reference_time_s
+    center = np.asarray(motion.center_m)
     out = np.empty_like(xyz)
+    per_point_from = len(t_from) > 1 or len(t_to) == 1
+    if per_point_from:
+        R_to = rotation_matrices(x, t_to[:1] - T)[0]
+    else:
+        R_from_T = rotation_matrices(x, t_from[:1] - T)[0].T
     for start in range(0, len(xyz), CHUNK):
         sl = slice(start, start + CHUNK)
-        tau_from = (t_from[sl] if len(t_from) > 1 else t_from) - T
-        tau_to = (t_to[sl] if len(t_to) > 1 else t_to) - T
-        out[sl] = transport(x, xyz[sl], tau_from, tau_to)
+        v = xyz[sl] - center
+        if per_point_from:
+            tau = t_from[sl] - T if len(t_from) > 1 else np.full(len(v), t_from[0] - T)
+            out[sl] = apply_rotation(x, tau, v, inverse=True) @ R_to.T + center
+        else:
+            out[sl] = apply_rotation(x, t_to[sl] - T, v @ R_from_T.T) + center
     return out
 
 
