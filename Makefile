@@ -8,19 +8,19 @@ STAMP := $(VENV)/.installed
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml scripts/system-deps.sh
+$(STAMP): pyproject.toml client/pyproject.toml scripts/system-deps.sh
 	sh scripts/system-deps.sh
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev]'
+	$(BIN)/python -m pip install -q -e ./client -e '.[dev]'
 	touch $(STAMP)
 
 demo: install
 	$(BIN)/tumblescan demo --out demo-output
 
 lint: install
-	$(BIN)/ruff check service tests bench
-	$(BIN)/ruff format --check service tests bench
+	$(BIN)/ruff check service client tests bench
+	$(BIN)/ruff format --check service client tests bench
 	$(BIN)/mypy
 
 test: lint

@@ -147,41 +147,6 @@ def rectify(
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")
 
 
-@app.command()
-@input_errors
-def demo(
-    out: Annotated[Path, typer.Option(help="where the demo writes its files")] = Path("demo-output"),
-    seed: Annotated[int, typer.Option(min=0)] = 7,
-) -> None:
-    """Simulate a tumbling satellite, estimate its motion, print it next to the truth and
-    write the rectified cloud."""
-    from .report_text import comparison_table
-
-    rng = np.random.default_rng(seed)
-    motion = random_motion(rng)
-    scene = Scene()
-    out.mkdir(parents=True, exist_ok=True)
-    typer.echo(f"simulating {scene.frames} frames of a 14.4 m satellite at 50 m (Table 1 scanner, seed {seed})...")
-    tracks, _ = simulate_tracks(motion, scene, seed=seed)
-    cloud = simulate_frames(motion, scene, seed=seed)
-    result = estimate_motion(tracks, EstimateOptions(seed=seed))
-    typer.echo(format_result(result))
-    typer.echo("")
-    typer.echo(comparison_table(result, motion))
-    T = result.reference_time_s
-    rect = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=T)
-    fields: dict[str, np.ndarray] = {"frame": cloud.frame, "line": cloud.line}
-    write_ply(out / "frames.ply", TimedCloud(cloud.xyz_m, cloud.t_s, fields))
-    write_ply(out / "rectified.ply", TimedCloud(rect, cloud.t_s, dict(fields)))
-    (out / "result.json").write_text(result.model_dump_json(indent=2))
-    true_rect = rectify_points(cloud.xyz_m, cloud.t_s, motion, to_time_s=T)
-    err = float(np.linalg.norm(rect - true_rect, axis=1).mean())
-    typer.echo(
-        f"\nrectified {len(cloud.t_s)} points to t={T:.4f} s: mean error from the motion estimate {err * 1000:.2f} mm"
-    )
-    typer.echo(f"wrote {out / 'rectified.ply'}, {out / 'frames.ply'} and {out / 'result.json'}")
-
-
 def load_result(path: Path) -> MotionResult:
     from pydantic import ValidationError
 
@@ -227,3 +192,9 @@ def _vec(v: Any, digits: int = 6) -> str:
 
 def main() -> None:
     app()
+
+
+# The service commands (serve, worker, submit, demo) live beside the core ones.
+from .cli_service import register  # noqa: E402
+
+register(app)

@@ -14,6 +14,7 @@ Recipe:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -65,7 +66,12 @@ class _Solution:
     warnings: list[str]
 
 
-def estimate_motion(tracks: Tracks, options: EstimateOptions | None = None) -> MotionResult:
+Progress = Callable[[str, float], None]
+
+
+def estimate_motion(
+    tracks: Tracks, options: EstimateOptions | None = None, *, progress: Progress | None = None
+) -> MotionResult:
     """Estimate the spin-precession motion of a target from feature tracks.
 
     Parameters
@@ -74,6 +80,8 @@ def estimate_motion(tracks: Tracks, options: EstimateOptions | None = None) -> M
         Validated observations (see :class:`tumblescan.tracks.Tracks`).
     options : EstimateOptions, optional
         Strategy, objective, model choice, reference time ``T`` (s), seed and noise.
+    progress : callable, optional
+        ``progress(stage, fraction)`` at each step; it may raise to abandon the estimate.
 
     Returns
     -------
@@ -84,10 +92,14 @@ def estimate_motion(tracks: Tracks, options: EstimateOptions | None = None) -> M
     # Every matrix here is small: multithreaded BLAS only adds synchronization (measured
     # 1.3x slower on 2 cores), and it would oversubscribe a worker pool.
     with threadpool_limits(1, user_api="blas"):
-        return _estimate(tracks, options or EstimateOptions())
+        return _estimate(tracks, options or EstimateOptions(), progress or _silent)
 
 
-def _estimate(tracks: Tracks, opts: EstimateOptions) -> MotionResult:
+def _silent(stage: str, fraction: float) -> None:
+    return None
+
+
+def _estimate(tracks: Tracks, opts: EstimateOptions, progress: Progress) -> MotionResult:
     started = time.perf_counter()
     T = float(tracks.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
     noise = opts.sensor or tracks.sensor or SensorNoise()
@@ -98,11 +110,13 @@ def _estimate(tracks: Tracks, opts: EstimateOptions) -> MotionResult:
     for attempt in range(opts.max_attempts):
         attempts += 1
         path = "swarm" if opts.strategy == "swarm" or attempt > 0 else "initializer"
+        progress(f"estimating (attempt {attempt + 1})", attempt / opts.max_attempts)
         sol = _attempt(tracks, T, noise, n2, opts, path, rng, allow_fallback=opts.strategy == "auto")
         best = sol if best is None or _better(sol, best) else best
         if (sol.check is None or sol.check.passed) or opts.strategy == "lm":
             break
     assert best is not None
+    progress("estimated", 1.0)
     if best.check is not None and not best.check.passed:
         best.warnings.append(
             f"two-frame-count check failed after {attempts} attempt(s): solutions from {tracks.n_frames} and "

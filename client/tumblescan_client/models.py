@@ -1,0 +1,107 @@
+"""Typed responses. The motion result mirrors the service's contract exactly."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict
+
+Vec3 = tuple[float, float, float]
+Status = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+FINAL = ("succeeded", "failed", "cancelled")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+
+class Spin(_Model):
+    axis: Vec3
+    alpha_deg: float
+    beta_deg: float
+    rate_deg_s: float
+
+
+class Precession(_Model):
+    axis: Vec3 | None
+    alpha_deg: float | None
+    beta_deg: float | None
+    rate_deg_s: float
+    center_m: Vec3
+
+
+class Uncertainty(_Model):
+    spin_axis_deg: float
+    spin_rate_deg_s: float
+    precession_axis_deg: float | None
+    precession_rate_deg_s: float
+    center_m: Vec3
+
+
+class Fit(_Model):
+    rms_residual_m: float
+    observations: int
+    tracks: int
+    frames: int
+    outliers: int = 0
+
+
+class Validation(_Model):
+    passed: bool
+    frames: tuple[int, int]
+    distance: float | None
+    threshold: float | None
+    test: str = "fixed"
+
+
+class Solver(_Model):
+    path: str
+    iterations: int
+    attempts: int
+    elapsed_s: float
+
+
+class MotionResult(_Model):
+    model: Literal["spin-precession", "spin-only"]
+    reference_time_s: float
+    spin: Spin
+    precession: Precession
+    nutation_angle_deg: float | None
+    uncertainty: Uncertainty
+    fit: Fit
+    validation: Validation
+    solver: Solver
+    warnings: list[str]
+
+
+class JobError(_Model):
+    code: str
+    message: str
+
+
+class JobArtifacts(_Model):
+    cloud: str | None = None
+
+
+class Job(_Model):
+    id: str
+    kind: str
+    status: Status
+    progress: float
+    stage: str
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    error: JobError | None
+    result: dict[str, Any] | None
+    artifacts: JobArtifacts
+
+    @property
+    def done(self) -> bool:
+        return self.status in FINAL
+
+
+class JobPage(_Model):
+    items: list[Job]
+    next_cursor: str | None

@@ -1,0 +1,49 @@
+"""Dependencies: the job service and the caller's identity."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, status
+
+from ..jobs.service import JobService
+from ..settings import Settings
+
+
+def get_service(request: Request) -> JobService:
+    return request.app.state.service  # type: ignore[no-any-return]
+
+
+def get_settings_dep(request: Request) -> Settings:
+    return request.app.state.settings  # type: ignore[no-any-return]
+
+
+def key_id(key: str) -> str:
+    """What a job records of the key that created it: a hash, never the key."""
+    return hashlib.sha256(key.encode()).hexdigest()[:32]
+
+
+def get_owner(request: Request) -> str | None:
+    """The caller's key id when API keys are configured (401 without a valid one), else None."""
+    hashes: list[str] = request.app.state.key_hashes
+    if not hashes:
+        return None
+    header = request.headers.get("authorization", "")
+    scheme, _, key = header.partition(" ")
+    if scheme.lower() != "bearer" or not key:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "missing API key (Authorization: Bearer <key>)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    kid = key_id(key.strip())
+    if not any(hmac.compare_digest(kid, h) for h in hashes):
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid API key", headers={"WWW-Authenticate": "Bearer"})
+    return kid
+
+
+ServiceDep = Annotated[JobService, Depends(get_service)]
+OwnerDep = Annotated[str | None, Depends(get_owner)]
+SettingsDep = Annotated[Settings, Depends(get_settings_dep)]

@@ -1,0 +1,68 @@
+"""One error body for every failure: ``{"detail": {"code", "message", "field"?, "errors"?}}``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from sqlalchemy.exc import OperationalError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from ..errors import InputError
+from ..jobs.artifacts import UploadTooLargeError
+from ..jobs.service import OptionsError, QueueUnavailableError
+
+RETRY_AFTER_S = "5"
+
+
+def error_response(status: int, code: str, message: str, **extra: Any) -> JSONResponse:
+    headers = {"Retry-After": RETRY_AFTER_S} if status == 503 else None
+    return JSONResponse({"detail": {"code": code, "message": message, **extra}}, status_code=status, headers=headers)
+
+
+def describe(errors: list[dict[str, Any]], prefix: str = "") -> str:
+    parts = []
+    for e in errors:
+        loc = ".".join(str(p) for p in (prefix, *e.get("loc", ())) if p != "")
+        msg = "unknown option" if e.get("type") == "extra_forbidden" else e.get("msg", "invalid")
+        parts.append(f"{loc}: {msg}")
+    return "; ".join(parts)
+
+
+def install(app: FastAPI) -> None:
+    @app.exception_handler(InputError)
+    async def _input(_: Request, exc: InputError) -> JSONResponse:
+        return error_response(422, exc.code, str(exc), field=exc.field)
+
+    @app.exception_handler(OptionsError)
+    async def _options(_: Request, exc: OptionsError) -> JSONResponse:
+        return error_response(422, "invalid_options", describe(exc.errors, "options"), errors=exc.errors)
+
+    @app.exception_handler(RequestValidationError)
+    async def _request(_: Request, exc: RequestValidationError) -> JSONResponse:
+        errs = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
+        return error_response(422, "invalid_request", describe(errs), errors=errs)
+
+    @app.exception_handler(UploadTooLargeError)
+    async def _too_large(_: Request, exc: UploadTooLargeError) -> JSONResponse:
+        return error_response(413, "upload_too_large", str(exc))
+
+    @app.exception_handler(QueueUnavailableError)
+    async def _queue(_: Request, exc: QueueUnavailableError) -> JSONResponse:
+        return error_response(503, "queue_unavailable", f"the job queue is unavailable, retry later ({exc})")
+
+    @app.exception_handler(OperationalError)
+    async def _db(_: Request, exc: OperationalError) -> JSONResponse:
+        return error_response(503, "store_unavailable", "the job store is unavailable, retry later")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 409: "conflict"}.get(
+            exc.status_code, "http_error"
+        )
+        resp = error_response(exc.status_code, code, str(exc.detail))
+        for k, v in (exc.headers or {}).items():
+            resp.headers[k] = v
+        return resp

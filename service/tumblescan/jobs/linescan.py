@@ -1,0 +1,92 @@
+"""The ``linescan-motion`` job kind: motion from feature tracks, plus an optional cloud with
+per-point times rectified to the motion's reference time."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..cloud_io import TimedCloud, read_ply, write_ply
+from ..errors import InputError, MalformedInputError
+from ..estimate import EstimateOptions, estimate_motion
+from ..rectify import rectify
+from ..tracks_io import read_tracks, tracks_from_json
+from .kinds import JobContext, JobOutput, register
+
+TRACKS_FILE = "input-tracks"
+CLOUD_FILE = "input-cloud.ply"
+
+
+class LinescanMotion:
+    name = "linescan-motion"
+    options_model = EstimateOptions
+
+    def accept_json(self, payload: Any, save: Callable[[str, bytes], Path]) -> dict[str, str]:
+        if not isinstance(payload, dict) or set(payload) != {"tracks"}:
+            keys = sorted(payload) if isinstance(payload, dict) else []
+            raise MalformedInputError(f'input must be {{"tracks": ...}}; got keys {keys}', field="input")
+        tracks_from_json(payload["tracks"])  # full validation before the job is accepted
+        save(TRACKS_FILE + ".json", json.dumps(payload["tracks"]).encode())
+        return {"tracks": TRACKS_FILE + ".json"}
+
+    def accept_files(self, files: dict[str, Path]) -> dict[str, str]:
+        unknown = sorted(set(files) - {"file", "cloud"})
+        if unknown:
+            raise MalformedInputError(f"unknown upload field(s): {', '.join(unknown)}", field=unknown[0])
+        if "file" not in files:
+            raise MalformedInputError("an upload needs 'file' (tracks JSON or CSV)", field="file")
+        kind = sniff(files["file"])
+        if kind in ("ply", "npz"):
+            raise MalformedInputError(
+                f"'file' is a {kind.upper()} of dense frames: estimating motion from frames without feature tracks "
+                "is not available yet; upload tracks (JSON or CSV) as 'file' and the cloud as 'cloud' to rectify it",
+                field="file",
+            )
+        read_tracks(files["file"])
+        accepted = {"tracks": files["file"].name}
+        if "cloud" in files:
+            if sniff(files["cloud"]) != "ply":
+                raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
+            read_ply(files["cloud"])
+            accepted["cloud"] = files["cloud"].name
+        return accepted
+
+    def run(self, ctx: JobContext) -> JobOutput:
+        # 1. Read and validate the tracks.
+        ctx.progress("loading", 0.02)
+        tracks = read_tracks(ctx.inputs["tracks"])
+        options = EstimateOptions.model_validate(ctx.options)
+        # 2. Estimate, reporting through the attempts (each report is a cancellation point).
+        result = estimate_motion(tracks, options, progress=lambda stage, f: ctx.progress(stage, 0.05 + 0.75 * f))
+        artifacts: dict[str, str] = {}
+        # 3. Rectify the cloud, if one came with the tracks.
+        if "cloud" in ctx.inputs:
+            ctx.progress("rectifying", 0.85)
+            cloud = read_ply(ctx.inputs["cloud"])
+            xyz = rectify(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
+            ctx.progress("writing", 0.95)
+            write_ply(ctx.output_path("cloud.ply"), TimedCloud(xyz, cloud.t_s, cloud.fields))
+            artifacts["cloud"] = "cloud.ply"
+        return JobOutput(result=result.model_dump(mode="json"), artifacts=artifacts)
+
+
+def sniff(path: Path) -> str:
+    """'ply', 'npz', 'json' or 'csv' from the first bytes (names are not trusted)."""
+    with open(path, "rb") as fh:
+        head = fh.read(64)
+    if head.startswith(b"ply"):
+        return "ply"
+    if head.startswith(b"PK"):
+        return "npz"
+    if head.lstrip().startswith((b"{", b"[")):
+        return "json"
+    if head.lstrip().lower().startswith(b"track"):
+        return "csv"
+    raise MalformedInputError("file is neither tracks (JSON, CSV) nor a PLY or NPZ cloud", field="file")
+
+
+__all__ = ["InputError", "LinescanMotion", "sniff"]
+
+register(LinescanMotion())

@@ -1,0 +1,41 @@
+"""The huey queue: SQLite in the data directory by default, Redis when configured. Tasks
+carry only a job id; the job store is the source of truth, so a task that finds its job no
+longer queued does nothing, and enqueuing a job twice is harmless."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from huey import Huey, RedisHuey, SqliteHuey
+from huey.signals import SIGNAL_INTERRUPTED
+
+from ..settings import Settings
+from .runner import run_job
+from .runtime import get_runtime
+
+log = logging.getLogger("tumblescan.queue")
+TASK_NAME = "tumblescan.run_job"
+
+
+def make_huey(settings: Settings) -> tuple[Huey, Any]:
+    """The queue and its single task (``task(job_id)`` enqueues)."""
+    if settings.redis_url:
+        huey: Huey = RedisHuey("tumblescan", url=settings.redis_url, results=False, blocking=True)
+    else:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        huey = SqliteHuey("tumblescan", filename=str(settings.data_dir / "queue.db"), results=False)
+
+    @huey.task(name=TASK_NAME)
+    def execute(job_id: str) -> None:
+        run_job(get_runtime(settings), job_id)
+
+    @huey.signal(SIGNAL_INTERRUPTED)
+    def interrupted(signal: str, task: Any, *args: Any, **kwargs: Any) -> None:
+        # The consumer is shutting down mid-job: put the job back for the next start.
+        job_id = task.args[0] if task.args else None
+        if job_id and get_runtime(settings).store.requeue(job_id, count_attempt=False):
+            execute(job_id)
+            log.info("job %s interrupted by shutdown and re-queued", job_id)
+
+    return huey, execute
