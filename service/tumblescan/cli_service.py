@@ -158,7 +158,7 @@ class ProgressBar:
         self.width = width
 
     def __call__(self, job: Any) -> None:
-        filled = int(round(job.progress * self.width))
+        filled = round(job.progress * self.width)
         bar = "#" * filled + "-" * (self.width - filled)
         sys.stderr.write(f"\r[{bar}] {100 * job.progress:5.1f} %  {job.status:<9} {job.stage[:28]:<28}")
         sys.stderr.flush()
@@ -212,11 +212,11 @@ def demo(
         T = result.reference_time_s
         true_rect = motion.position(cloud.reference_m, np.full(len(cloud.t_s), T))
         err_mm = 1000 * float(np.linalg.norm(rect.xyz_m - true_rect, axis=1).mean())
+        verdict = "passed" if result.validation.passed else "FAILED"
+        typer.echo(f"\nvalidation {verdict}; solver {result.solver.path}, {result.solver.elapsed_s * 1000:.0f} ms")
         typer.echo(
-            f"\nvalidation {'passed' if result.validation.passed else 'FAILED'}; solver {result.solver.path}, {result.solver.elapsed_s * 1000:.0f} ms"
-        )
-        typer.echo(
-            f"rectified {len(rect)} points to t={T:.4f} s: mean distance to the true undistorted cloud {err_mm:.1f} mm (2 cm sensor noise included)"
+            f"rectified {len(rect)} points to t={T:.4f} s: mean distance to the true undistorted cloud "
+            f"{err_mm:.1f} mm (2 cm sensor noise included)"
         )
         typer.echo(f"wrote {out / 'rectified.ply'}, {out / 'result.json'}, {out / 'tracks.json'}, {out / 'frames.ply'}")
     finally:

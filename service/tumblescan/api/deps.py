@@ -13,11 +13,13 @@ from ..settings import Settings
 
 
 def get_service(request: Request) -> JobService:
-    return request.app.state.service  # type: ignore[no-any-return]
+    service: JobService = request.app.state.service
+    return service
 
 
 def get_settings_dep(request: Request) -> Settings:
-    return request.app.state.settings  # type: ignore[no-any-return]
+    settings: Settings = request.app.state.settings
+    return settings
 
 
 def key_id(key: str) -> str:

@@ -50,10 +50,10 @@ class JobPublic(BaseModel):
         return cls(
             id=job.id,
             kind=job.kind,
-            status=job.status,  # type: ignore[arg-type]
+            status=job.status,
             progress=job.progress,
             stage=job.stage,
-            created_at=_ts(job.created_at),  # type: ignore[arg-type]
+            created_at=datetime.fromtimestamp(job.created_at, UTC),
             started_at=_ts(job.started_at),
             finished_at=_ts(job.finished_at),
             error=JobError(code=job.error_code, message=job.error_message or "") if job.error_code else None,

@@ -8,6 +8,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel
+
 from ..cloud_io import TimedCloud, read_ply, write_ply
 from ..errors import InputError, MalformedInputError
 from ..estimate import EstimateOptions, estimate_motion
@@ -21,7 +23,7 @@ CLOUD_FILE = "input-cloud.ply"
 
 class LinescanMotion:
     name = "linescan-motion"
-    options_model = EstimateOptions
+    options_model: type[BaseModel] = EstimateOptions
 
     def accept_json(self, payload: Any, save: Callable[[str, bytes], Path]) -> dict[str, str]:
         if not isinstance(payload, dict) or set(payload) != {"tracks"}:

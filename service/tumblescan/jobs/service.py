@@ -81,7 +81,7 @@ class JobService:
         try:
             opts = kind.options_model.model_validate(options)
         except ValidationError as exc:
-            raise OptionsError(exc.errors(include_url=False, include_input=False)) from None
+            raise OptionsError([dict(e) for e in exc.errors(include_url=False, include_input=False)]) from None
         return kind, opts.model_dump(mode="json", exclude_unset=True)
 
     def _create_and_enqueue(
@@ -105,7 +105,7 @@ class JobService:
     def list(
         self, *, status: str | None, owner: str | None, limit: int, cursor: str | None
     ) -> tuple[list[Job], str | None]:
-        return self.store.list(status=status, owner=owner, limit=limit, cursor=cursor)
+        return self.store.list_jobs(status=status, owner=owner, limit=limit, cursor=cursor)
 
     def cancel(self, job_id: str, owner: str | None) -> Job | None:
         job = self.store.get(job_id, owner=owner)

@@ -169,7 +169,7 @@ class JobStore:
             row = conn.execute(q).first()
         return Job.from_row(row) if row else None
 
-    def list(
+    def list_jobs(
         self, *, status: str | None = None, owner: str | None = None, limit: int = 50, cursor: str | None = None
     ) -> tuple[list[Job], str | None]:
         """Newest first; ``cursor`` continues after the last job of the previous page."""

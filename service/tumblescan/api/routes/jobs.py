@@ -118,7 +118,8 @@ def get_job_cloud(
     cloud = read_ply(path)
     tmp = tempfile.NamedTemporaryFile(suffix=".npz", delete=False)  # noqa: SIM115 (removed after sending)
     with tmp:
-        np.savez(tmp, xyz_m=cloud.xyz_m, t_s=cloud.t_s, **cloud.fields)
+        arrays: dict[str, Any] = {"xyz_m": cloud.xyz_m, "t_s": cloud.t_s, **cloud.fields}
+        np.savez(tmp, **arrays)
     return FileResponse(
         tmp.name,
         media_type="application/octet-stream",
