@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -35,6 +36,7 @@ from .tracks import MIN_FRAMES, Tracks
 from .uncertainty import Similarity, axis_sigma_rad, similarity
 
 FloatArray = NDArray[np.float64]
+Progress = Callable[[str, float], None]
 Strategy = Literal["auto", "lm", "swarm"]
 ModelChoice = Literal["auto", "spin-precession", "spin-only"]
 
@@ -58,15 +60,28 @@ class EstimateOptions(BaseModel):
 
 
 @dataclass
+class _Run:
+    """What every step of one estimate shares."""
+
+    T: float
+    noise: SensorNoise
+    n2: int
+    opts: EstimateOptions
+    rng: np.random.Generator
+    progress: Progress
+
+    @property
+    def allow_fallback(self) -> bool:
+        return self.opts.strategy == "auto"
+
+
+@dataclass
 class _Solution:
     fit: Fit
     path: str
     check: Similarity | None
     n2: int
     warnings: list[str]
-
-
-Progress = Callable[[str, float], None]
 
 
 def estimate_motion(
@@ -104,14 +119,14 @@ def _estimate(tracks: Tracks, opts: EstimateOptions, progress: Progress) -> Moti
     T = float(tracks.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
     noise = opts.sensor or tracks.sensor or SensorNoise()
     n2 = _validation_frames(tracks.n_frames, opts.validation_frames)
-    rng = np.random.default_rng(opts.seed)
+    run = _Run(T, noise, n2, opts, np.random.default_rng(opts.seed), progress)
     best: _Solution | None = None
     attempts = 0
     for attempt in range(opts.max_attempts):
         attempts += 1
         path = "swarm" if opts.strategy == "swarm" or attempt > 0 else "initializer"
         progress(f"estimating (attempt {attempt + 1})", attempt / opts.max_attempts)
-        sol = _attempt(tracks, T, noise, n2, opts, path, rng, allow_fallback=opts.strategy == "auto")
+        sol = _attempt(tracks, run, path)
         best = sol if best is None or _better(sol, best) else best
         if (sol.check is None or sol.check.passed) or opts.strategy == "lm":
             break
@@ -143,27 +158,18 @@ def _better(a: _Solution, b: _Solution) -> bool:
     return (a_ok and not b_ok) or (a_ok == b_ok and a.fit.chi2 < b.fit.chi2)
 
 
-def _attempt(
-    tracks: Tracks,
-    T: float,
-    noise: SensorNoise,
-    n2: int,
-    opts: EstimateOptions,
-    path: str,
-    rng: np.random.Generator,
-    *,
-    allow_fallback: bool,
-) -> _Solution:
+def _attempt(tracks: Tracks, run: _Run, path: str) -> _Solution:
     warnings: list[str] = []
     # 1-2. Start and refine the general model.
-    x0, x0_spin, taken = _start(tracks, T, opts, path, rng, allow_fallback, warnings)
-    kw = {"objective": opts.objective, "noise": noise, "reference_time_s": T}
-    full = fit_model(tracks, x0, spin_only=False, reject_outliers=opts.reject_outliers, **kw)  # type: ignore[arg-type]
+    opts, n2 = run.opts, run.n2
+    x0, x0_spin, taken = _start(tracks, run, path, warnings)
+    fit = partial(fit_model, objective=opts.objective, noise=run.noise, reference_time_s=run.T)
+    full = fit(tracks, x0, spin_only=False, reject_outliers=opts.reject_outliers)
     # 3. Model choice, on the observations the general model kept.
     chosen = full
     if opts.model != "spin-precession":
         spin_x0 = x0_spin if x0_spin is not None else _spin_start(full.x)
-        spin = fit_model(tracks, spin_x0, spin_only=True, keep=full.keep, reject_outliers=False, **kw)  # type: ignore[arg-type]
+        spin = fit(tracks, spin_x0, spin_only=True, keep=full.keep, reject_outliers=False)
         if opts.model == "spin-only" or _prefer_spin_only(full, spin, opts.significance, warnings):
             chosen = spin
     # 4. Validate with the first n2 frames, solved from scratch along the same path.
@@ -172,16 +178,11 @@ def _attempt(
         return _Solution(chosen, taken, None, n2, warnings)
     sub_tracks = tracks.first_frames(n2)
     try:
-        s0, s0_spin, _ = _start(sub_tracks, T, opts, path, rng, allow_fallback, [])
+        s0, s0_spin, _ = _start(sub_tracks, run, path, [])
         gauge = chosen.body_m.mean(axis=0) if chosen.spin_only else None
         start = (s0_spin if s0_spin is not None else _spin_start(s0)) if chosen.spin_only else s0
-        sub = fit_model(
-            sub_tracks,
-            start,
-            spin_only=chosen.spin_only,
-            gauge_point=gauge,
-            reject_outliers=opts.reject_outliers,
-            **kw,  # type: ignore[arg-type]
+        sub = fit(
+            sub_tracks, start, spin_only=chosen.spin_only, gauge_point=gauge, reject_outliers=opts.reject_outliers
         )
         check = similarity(
             chosen.x, sub.x, sub.cov, free=chosen.free, noise_scale=chosen.noise_scale, alpha=opts.significance
@@ -192,26 +193,21 @@ def _attempt(
     return _Solution(chosen, taken, check, n2, warnings)
 
 
-def _start(
-    tracks: Tracks,
-    T: float,
-    opts: EstimateOptions,
-    path: str,
-    rng: np.random.Generator,
-    allow_fallback: bool,
-    warnings: list[str],
-) -> tuple[FloatArray, FloatArray | None, str]:
+def _start(tracks: Tracks, run: _Run, path: str, warnings: list[str]) -> tuple[FloatArray, FloatArray | None, str]:
     """Starting 9-vectors for the full and the spin-only model, and the path taken."""
     if path == "initializer":
         try:
-            guess = cone_initial(tracks, T)
+            guess = cone_initial(tracks, run.T)
             return guess.x, guess.x_spin_only, "initializer+lm"
         except InitializerError as exc:
-            if not allow_fallback:
+            if not run.allow_fallback:
                 raise
             warnings.append(f"closed-form initializer unavailable ({exc}); used the swarm")
-    found = swarm_search(tracks, T, opts.swarm, rng)
-    return found.x, None, f"swarm({opts.swarm.variant})+lm"
+    cfg = run.opts.swarm
+    found = swarm_search(
+        tracks, run.T, cfg, run.rng, on_iteration=lambda i: run.progress("swarm search", (i + 1) / cfg.iterations)
+    )
+    return found.x, None, f"swarm({cfg.variant})+lm"
 
 
 def _spin_start(x: FloatArray) -> FloatArray:

@@ -32,6 +32,7 @@ azimuths wrapped and the other dimensions reflected at the bounds. They differ i
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -102,8 +103,16 @@ class PairwiseFitness:
         return np.sum(r[..., 0] ** 2, axis=1), center
 
 
-def swarm_search(tracks: Tracks, reference_time_s: float, config: SwarmConfig, rng: np.random.Generator) -> SwarmResult:
-    """Run the configured swarm variant; see the module docstring for the update rules."""
+def swarm_search(
+    tracks: Tracks,
+    reference_time_s: float,
+    config: SwarmConfig,
+    rng: np.random.Generator,
+    *,
+    on_iteration: Callable[[int], None] | None = None,
+) -> SwarmResult:
+    """Run the configured swarm variant; see the module docstring for the update rules.
+    ``on_iteration(i)`` is called after each iteration (it may raise to stop the search)."""
     fitness = PairwiseFitness(tracks, reference_time_s)
     lo, hi = _bounds(config)
     span = hi - lo
@@ -140,6 +149,8 @@ def swarm_search(tracks: Tracks, reference_time_s: float, config: SwarmConfig, r
         pbest[better], pbest_cost[better] = pos[better], cost[better]
         g = int(np.argmin(pbest_cost))
         history[it] = pbest_cost[g]
+        if on_iteration is not None:
+            on_iteration(it)
     best_cost, center = fitness(pbest[g][None, :])
     x = np.concatenate([pbest[g], center[0]])
     assert x.shape == (N_PARAMS,)
