@@ -22,6 +22,9 @@ class Settings(BaseSettings):
     )
     database_url: str | None = Field(None, description="SQLAlchemy URL; default sqlite:///<data_dir>/jobs.db")
     redis_url: str | None = Field(None, description="use RedisHuey at this URL instead of the embedded SQLite queue")
+    queue_name: str = Field(
+        "tumblescan", pattern=r"^[A-Za-z0-9_.-]+$", description="queue name (deployments sharing a Redis)"
+    )
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
     workers: int = Field(

@@ -11,7 +11,6 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
-from fastapi.routing import APIRoute
 
 from ..jobs.queue import make_huey
 from ..jobs.runtime import get_runtime
@@ -37,6 +36,7 @@ def worker_env(settings: Settings) -> dict[str, str]:
             "MKL_NUM_THREADS": "1",
         }
     )
+    env["TUMBLESCAN_QUEUE_NAME"] = settings.queue_name
     if settings.redis_url:
         env["TUMBLESCAN_REDIS_URL"] = settings.redis_url
     return env
@@ -78,7 +78,7 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
         version="0.1.0",
         summary="Motion of tumbling space targets from line-scan lidar, as queued jobs.",
         lifespan=lifespan,
-        generate_unique_id_function=lambda route: route.name if isinstance(route, APIRoute) else "",
+        generate_unique_id_function=lambda route: route.name,
     )
     errors.install(app)
     app.include_router(jobs.router)

@@ -21,10 +21,10 @@ TASK_NAME = "tumblescan.run_job"
 def make_huey(settings: Settings) -> tuple[Huey, Any]:
     """The queue and its single task (``task(job_id)`` enqueues)."""
     if settings.redis_url:
-        huey: Huey = RedisHuey("tumblescan", url=settings.redis_url, results=False, blocking=True)
+        huey: Huey = RedisHuey(settings.queue_name, url=settings.redis_url, results=False, blocking=True)
     else:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        huey = SqliteHuey("tumblescan", filename=str(settings.data_dir / "queue.db"), results=False)
+        huey = SqliteHuey(settings.queue_name, filename=str(settings.data_dir / "queue.db"), results=False)
 
     @huey.task(name=TASK_NAME)
     def execute(job_id: str) -> None:

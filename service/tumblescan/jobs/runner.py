@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import os
+import socket
 import threading
 import time
 from pathlib import Path
@@ -36,7 +38,7 @@ class _Lease(threading.Thread):
 
 def run_job(rt: Runtime, job_id: str) -> str | None:
     """Run ``job_id`` if it is still queued; returns its final status (None if not ours)."""
-    job = rt.store.claim(job_id)
+    job = rt.store.claim(job_id, worker=f"{socket.gethostname()}:{os.getpid()}")
     if job is None:
         return None
     lease = _Lease(rt, job_id)

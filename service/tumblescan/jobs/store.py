@@ -38,6 +38,7 @@ from sqlalchemy import (
     select,
     update,
 )
+from sqlalchemy.exc import IntegrityError, OperationalError, ProgrammingError
 
 STATUSES = ("queued", "running", "succeeded", "failed", "cancelled")
 FINAL = ("succeeded", "failed", "cancelled")
@@ -58,6 +59,7 @@ jobs = Table(
     Column("heartbeat_at", Float),
     Column("attempts", Integer, nullable=False, default=0),
     Column("cancel_requested", Boolean, nullable=False, default=False),
+    Column("worker", String(128)),
     Column("error_code", String(64)),
     Column("error_message", Text),
     Column("options", Text, nullable=False),
@@ -94,6 +96,7 @@ class Job:
     heartbeat_at: float | None
     attempts: int
     cancel_requested: bool
+    worker: str | None
     error_code: str | None
     error_message: str | None
     options: dict[str, Any]
@@ -120,7 +123,7 @@ class JobStore:
     def __init__(self, url: str) -> None:
         self.url = url
         self.engine = _engine(url)
-        metadata.create_all(self.engine)
+        _create_tables(self.engine)
 
     @contextmanager
     def _tx(self) -> Iterator[Connection]:
@@ -208,15 +211,20 @@ class JobStore:
 
     # Transitions (each conditional on the current status).
 
-    def claim(self, job_id: str) -> Job | None:
-        """``queued -> running`` for this worker; ``None`` if the job is not queued (any more)."""
+    def claim(self, job_id: str, worker: str | None = None) -> Job | None:
+        """``queued -> running`` for ``worker``; ``None`` if the job is not queued (any more)."""
         now = time.time()
         with self._tx() as conn:
             done = conn.execute(
                 update(jobs)
                 .where(jobs.c.id == job_id, jobs.c.status == "queued", jobs.c.cancel_requested.is_(False))
                 .values(
-                    status="running", started_at=now, heartbeat_at=now, stage="starting", attempts=jobs.c.attempts + 1
+                    status="running",
+                    started_at=now,
+                    heartbeat_at=now,
+                    stage="starting",
+                    attempts=jobs.c.attempts + 1,
+                    worker=worker,
                 )
             ).rowcount
         return self.get(job_id) if done else None
@@ -403,6 +411,18 @@ def decode_cursor(cursor: str) -> tuple[float, str]:
         return float(created), job_id
     except (ValueError, UnicodeDecodeError):
         raise ValueError("cursor is not one this service issued") from None
+
+
+def _create_tables(engine: Engine, tries: int = 5) -> None:
+    """``create_all`` tolerant of other processes creating the same tables at the same time."""
+    for attempt in range(tries):
+        try:
+            metadata.create_all(engine)
+            return
+        except (IntegrityError, ProgrammingError, OperationalError):
+            if attempt == tries - 1:
+                raise
+            time.sleep(0.2 * (attempt + 1))
 
 
 def _engine(url: str) -> Engine:

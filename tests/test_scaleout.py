@@ -1,0 +1,53 @@
+"""Scale-out mode: an API process (no workers) and two worker processes sharing PostgreSQL,
+Redis and an artifact directory finish a batch of jobs."""
+
+from __future__ import annotations
+
+import uuid
+from pathlib import Path
+
+import pytest
+
+from tumblescan import tracks_to_json
+from tumblescan.jobs.store import JobStore
+from tumblescan_client import Client
+
+from .conftest import tracks_for
+from .infra import REDIS_URL, ensure_redis, postgres_database
+from .live import serve, spawn, stop, wait_ready
+
+pytestmark = pytest.mark.slow
+
+
+def test_api_and_two_workers_on_redis_and_postgres_finish_a_batch(tmp_path: Path) -> None:
+    ensure_redis()
+    with postgres_database() as db_url:
+        env = {
+            "TUMBLESCAN_REDIS_URL": REDIS_URL,
+            "TUMBLESCAN_DATABASE_URL": db_url,
+            "TUMBLESCAN_QUEUE_NAME": f"test-{uuid.uuid4().hex[:8]}",
+            "TUMBLESCAN_ARTIFACT_DIR": str(tmp_path / "shared-artifacts"),
+        }
+        workers = [
+            spawn(
+                ["worker", "--workers", "1"],
+                {**env, "TUMBLESCAN_DATA_DIR": str(tmp_path / f"w{i}")},
+                tmp_path / f"w{i}.log",
+            )
+            for i in range(2)
+        ]
+        try:
+            with serve(tmp_path / "api", extra_env=env, args=["--no-workers"]) as url:
+                wait_ready(url, workers[0], tmp_path / "w0.log")
+                tracks = [tracks_to_json(tracks_for(60 + i)[1]) for i in range(4)]
+                with Client(url) as client:
+                    ready = client._http.get("/readyz").json()
+                    assert ready["checks"]["workers"] == "2 process(es)"
+                    jobs = [client.jobs.create(tracks=tracks[i % 4], options={"seed": i}) for i in range(20)]
+                    results = [client.jobs.wait(j.id, timeout=180) for j in jobs]
+                assert [r.status for r in results] == ["succeeded"] * 20
+                ran_on = {JobStore(db_url).get(j.id).worker for j in jobs}  # type: ignore[union-attr]
+                assert 1 <= len(ran_on) <= 2 and None not in ran_on
+        finally:
+            for w in workers:
+                stop(w)
