@@ -46,6 +46,16 @@ def _next_poll(delay: float) -> float:
     return min(delay * 1.5, 2.0)
 
 
+LONG_POLL_S = 10.0
+
+
+def _hold(deadline: float | None) -> float:
+    """How long the service may hold one long-poll request."""
+    if deadline is None:
+        return LONG_POLL_S
+    return round(max(0.0, min(LONG_POLL_S, deadline - time.monotonic())), 3)
+
+
 class Jobs:
     """``client.jobs``: create, upload, get, wait, result, download_cloud, cancel, list."""
 
@@ -87,19 +97,24 @@ class Jobs:
         return Job.model_validate(self._c._request("GET", f"/v1/jobs/{job_id}", timeout=timeout).json())
 
     def wait(self, job_id: str, *, timeout: float | None = 600.0, on_progress: Progress | None = None) -> Job:
-        """Poll (with backoff from 50 ms to 2 s) until the job is finished."""
+        """Wait until the job is finished, long-polling the service (each request returns as
+        soon as the job changes), with backoff between requests from 10 ms to 2 s."""
         deadline = None if timeout is None else time.monotonic() + timeout
-        delay = 0.05
+        delay = 0.01
         while True:
-            job = self.get(job_id)
+            job = self._get_waiting(job_id, _hold(deadline))
             if on_progress:
                 on_progress(job)
             if job.done:
                 return job
-            if deadline is not None and time.monotonic() + delay > deadline:
+            if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             time.sleep(delay)
             delay = _next_poll(delay)
+
+    def _get_waiting(self, job_id: str, hold_s: float) -> Job:
+        resp = self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold_s}, timeout=hold_s + 30)
+        return Job.model_validate(resp.json())
 
     def result(self, job_id: str, *, timeout: float | None = 600.0) -> MotionResult:
         """Wait for the job and return its typed motion result (JobFailedError otherwise)."""
@@ -249,14 +264,16 @@ class AsyncJobs:
 
     async def wait(self, job_id: str, *, timeout: float | None = 600.0, on_progress: Progress | None = None) -> Job:
         deadline = None if timeout is None else time.monotonic() + timeout
-        delay = 0.05
+        delay = 0.01
         while True:
-            job = await self.get(job_id)
+            hold = _hold(deadline)
+            resp = await self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold}, timeout=hold + 30)
+            job = Job.model_validate(resp.json())
             if on_progress:
                 on_progress(job)
             if job.done:
                 return job
-            if deadline is not None and time.monotonic() + delay > deadline:
+            if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             await asyncio.sleep(delay)
             delay = _next_poll(delay)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+import time
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -13,11 +14,13 @@ from starlette.background import BackgroundTask
 
 from ...cloud_io import read_ply
 from ...errors import MalformedInputError
-from ...jobs.store import Job
+from ...jobs.store import FINAL, Job
 from ..deps import OwnerDep, ServiceDep
 from ..schemas import ErrorBody, JobCreate, JobList, JobPublic, Status
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+LONG_POLL_FIRST_S = 0.01
+LONG_POLL_MAX_S = 0.25
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (401, 404, 413, 422, 503)}
 
 
@@ -85,9 +88,27 @@ def list_jobs(
 
 
 @router.get("/{job_id}", responses=ERRORS)
-def get_job(job_id: str, request: Request, service: ServiceDep, owner: OwnerDep) -> JobPublic:
-    """A job's status, progress, result and artifact links."""
-    return public(_found(service.get(job_id, owner), job_id), request)
+def get_job(
+    job_id: str,
+    request: Request,
+    service: ServiceDep,
+    owner: OwnerDep,
+    wait: Annotated[float, Query(ge=0, le=30, description="long poll: hold up to this many seconds for a change")] = 0,
+) -> JobPublic:
+    """A job's status, progress, result and artifact links. With ``wait`` the answer comes as
+    soon as the job's status, stage or progress changes, or when ``wait`` runs out."""
+    job = _found(service.get(job_id, owner), job_id)
+    deadline = time.monotonic() + wait
+    seen = (job.status, job.stage, job.progress)
+    interval = LONG_POLL_FIRST_S
+    while job.status not in FINAL and time.monotonic() < deadline:
+        time.sleep(interval)
+        # Quick jobs are seen within milliseconds; many waiting clients don't flood the store.
+        interval = min(interval * 1.5, LONG_POLL_MAX_S)
+        job = _found(service.get(job_id, owner), job_id)
+        if (job.status, job.stage, job.progress) != seen:
+            break
+    return public(job, request)
 
 
 @router.get(
