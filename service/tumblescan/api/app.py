@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import subprocess
 import sys
 from collections.abc import AsyncIterator
@@ -44,7 +45,20 @@ def worker_env(settings: Settings) -> dict[str, str]:
 
 def start_workers(settings: Settings, count: int) -> subprocess.Popen[bytes]:
     cmd = [sys.executable, "-m", "tumblescan", "worker", "--workers", str(count)]
-    return subprocess.Popen(cmd, env=worker_env(settings))
+    return subprocess.Popen(cmd, env=worker_env(settings), preexec_fn=_die_with_parent)
+
+
+def _die_with_parent() -> None:
+    """Linux: the consumer gets SIGTERM if ``serve`` dies without stopping it (SIGKILL, crash),
+    so no orphaned workers keep taking jobs."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        pr_set_pdeathsig = 1
+        libc.prctl(pr_set_pdeathsig, signal.SIGTERM)
+    except OSError:
+        pass
 
 
 def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -> FastAPI:
