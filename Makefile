@@ -27,9 +27,10 @@ test: lint
 	$(BIN)/python -m pytest -q
 
 bench: install
-	$(BIN)/python bench/accuracy.py
-	$(BIN)/python bench/solvers.py
-	$(BIN)/python bench/speed.py
+	$(BIN)/python -m bench.accuracy
+	$(BIN)/python -m bench.solvers
+	$(BIN)/python -m bench.speed
+	$(BIN)/python -m bench.service
 
 clean:
 	rm -rf $(VENV) demo-output bench/out .pytest_cache .mypy_cache .ruff_cache
