@@ -35,7 +35,9 @@ def round_trips(url: str, tracks: list[dict], n: int) -> np.ndarray:
 async def throughput(url: str, tracks: list[dict], n: int) -> tuple[float, np.ndarray]:
     async with AsyncClient(url) as client:
         t0 = time.perf_counter()
-        jobs = await asyncio.gather(*(client.jobs.create(tracks=tracks[i % len(tracks)], options={"seed": i}) for i in range(n)))
+        jobs = await asyncio.gather(
+            *(client.jobs.create(tracks=tracks[i % len(tracks)], options={"seed": i}) for i in range(n))
+        )
         done = await asyncio.gather(*(client.jobs.wait(j.id, timeout=600) for j in jobs))
         total = time.perf_counter() - t0
     assert all(j.status == "succeeded" for j in done), [j.status for j in done]
@@ -62,11 +64,17 @@ def main() -> None:
     rows = [
         ["round trip, one job at a time (ms)", float(np.median(rt) * 1000), float(np.percentile(rt, 90) * 1000)],
         [f"{args.jobs} jobs at once: total (s)", total, "-"],
-        [f"{args.jobs} jobs at once: run time per job (ms)", float(np.median(run_s) * 1000), float(np.percentile(run_s, 90) * 1000)],
+        [
+            f"{args.jobs} jobs at once: run time per job (ms)",
+            float(np.median(run_s) * 1000),
+            float(np.percentile(run_s, 90) * 1000),
+        ],
     ]
     print(table(rows, ["measure", "median / value", "p90"]))
     print(f"throughput: {args.jobs / total:.1f} jobs/s")
-    (out_dir() / "service.txt").write_text(f"round trip median {np.median(rt) * 1000:.1f} ms; throughput {args.jobs / total:.1f} jobs/s\n")
+    (out_dir() / "service.txt").write_text(
+        f"round trip median {np.median(rt) * 1000:.1f} ms; throughput {args.jobs / total:.1f} jobs/s\n"
+    )
 
 
 if __name__ == "__main__":

@@ -21,11 +21,32 @@ DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
 Progress = Callable[[Job], None]
 
 
-def _headers(api_key: str | None) -> dict[str, str]:
-    h = {"User-Agent": "tumblescan-client/0.1"}
-    if api_key:
-        h["Authorization"] = f"Bearer {api_key}"
-    return h
+def _configure(
+    base_url: str | None, api_key: str | None, max_retries: int, retry: RetryPolicy | None
+) -> tuple[str, dict[str, str], RetryPolicy]:
+    """Base URL, headers and retry policy, from the arguments or the environment."""
+    url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
+    key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
+    headers = {"User-Agent": "tumblescan-client/0.1"}
+    if key:
+        headers["Authorization"] = f"Bearer {key}"
+    return url, headers, retry or RetryPolicy(max_retries=max_retries)
+
+
+def _transport_error(exc: httpx.TransportError) -> Exception:
+    if isinstance(exc, httpx.TimeoutException):
+        return APITimeoutError(f"request timed out: {exc}")
+    return APIConnectionError(f"cannot reach the service: {exc}")
+
+
+def _retry_delay(policy: RetryPolicy, attempt: int, resp: httpx.Response | None, error: Exception | None) -> float:
+    """Seconds to wait before the next try; raises the final error when none is left."""
+    if not policy.should_retry(attempt, resp):
+        if resp is not None:
+            raise error_for(resp)
+        assert error is not None
+        raise error
+    return policy.delay(attempt, resp)
 
 
 def _upload_parts(
@@ -183,10 +204,8 @@ class Client:
         retry: RetryPolicy | None = None,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
-        url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
-        key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
-        self.retry = retry or RetryPolicy(max_retries=max_retries)
-        self._http = httpx.Client(base_url=url, headers=_headers(key), timeout=timeout, transport=transport)
+        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = Jobs(self)
 
     def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
@@ -196,20 +215,12 @@ class Client:
         attempt = 0
         while True:
             try:
-                resp: httpx.Response | None = send()
-                error: Exception | None = None
-            except httpx.TimeoutException as exc:
-                resp, error = None, APITimeoutError(f"request timed out: {exc}")
+                resp, error = send(), None
             except httpx.TransportError as exc:
-                resp, error = None, APIConnectionError(f"cannot reach the service: {exc}")
+                resp, error = None, _transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            if not self.retry.should_retry(attempt, resp):
-                if resp is not None:
-                    raise error_for(resp)
-                assert error is not None
-                raise error
-            time.sleep(self.retry.delay(attempt, resp))
+            time.sleep(_retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     def close(self) -> None:
@@ -343,10 +354,8 @@ class AsyncClient:
         retry: RetryPolicy | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
-        key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
-        self.retry = retry or RetryPolicy(max_retries=max_retries)
-        self._http = httpx.AsyncClient(base_url=url, headers=_headers(key), timeout=timeout, transport=transport)
+        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = AsyncJobs(self)
 
     async def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
@@ -359,20 +368,12 @@ class AsyncClient:
         attempt = 0
         while True:
             try:
-                resp: httpx.Response | None = await send()
-                error: Exception | None = None
-            except httpx.TimeoutException as exc:
-                resp, error = None, APITimeoutError(f"request timed out: {exc}")
+                resp, error = await send(), None
             except httpx.TransportError as exc:
-                resp, error = None, APIConnectionError(f"cannot reach the service: {exc}")
+                resp, error = None, _transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            if not self.retry.should_retry(attempt, resp):
-                if resp is not None:
-                    raise error_for(resp)
-                assert error is not None
-                raise error
-            await asyncio.sleep(self.retry.delay(attempt, resp))
+            await asyncio.sleep(_retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     async def close(self) -> None:

@@ -9,6 +9,7 @@ other residuals along) and the fit repeated (at most ``MAX_REJECTION_ROUNDS`` ti
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -120,37 +121,27 @@ def _solve(
     if objective == "ml":
         return x, 0
     pair = PairwiseProblem(tracks, reference_time_s, free=free, base=x)
-    res = least_squares(
-        pair.residuals,
-        x[list(free)],
-        jac=pair.jacobian,
-        method="lm",
-        xtol=LM_TOL,
-        ftol=LM_TOL,
-        gtol=LM_TOL,
-        max_nfev=MAX_NFEV,
-    )
     out = x.copy()
-    out[list(free)] = res.x
-    return out, int(res.nfev)
+    out[list(free)], nfev = _lm(pair.residuals, pair.jacobian, x[list(free)])
+    return out, nfev
 
 
 def _lm_projected(problem: MLProblem, x0: FloatArray) -> tuple[FloatArray, int]:
     """LM over the free motion parameters with every ``P_j`` projected out."""
     free = list(problem.free)
-    res = least_squares(
-        problem.reduced_residuals,
-        x0[free],
-        jac=problem.reduced_jacobian,
-        method="lm",
-        xtol=LM_TOL,
-        ftol=LM_TOL,
-        gtol=LM_TOL,
-        max_nfev=MAX_NFEV,
-    )
     x = problem.base.copy()
-    x[free] = res.x
-    return x, int(res.nfev)
+    x[free], nfev = _lm(problem.reduced_residuals, problem.reduced_jacobian, x0[free])
+    return x, nfev
+
+
+def _lm(
+    residuals: Callable[[FloatArray], FloatArray], jacobian: Callable[[FloatArray], FloatArray], x0: FloatArray
+) -> tuple[FloatArray, int]:
+    """MINPACK Levenberg-Marquardt with this module's tolerances."""
+    res = least_squares(
+        residuals, x0, jac=jacobian, method="lm", xtol=LM_TOL, ftol=LM_TOL, gtol=LM_TOL, max_nfev=MAX_NFEV
+    )
+    return np.asarray(res.x, dtype=float), int(res.nfev)
 
 
 def _outliers(problem: MLProblem, z: FloatArray) -> NDArray[np.bool_]:
