@@ -3,6 +3,7 @@ Redis and an artifact directory finish a batch of jobs."""
 
 from __future__ import annotations
 
+import time
 import uuid
 from pathlib import Path
 
@@ -41,8 +42,11 @@ def test_api_and_two_workers_on_redis_and_postgres_finish_a_batch(tmp_path: Path
                 wait_ready(url, workers[0], tmp_path / "w0.log")
                 tracks = [tracks_to_json(tracks_for(60 + i)[1]) for i in range(4)]
                 with Client(url) as client:
-                    ready = client._http.get("/readyz").json()
-                    assert ready["checks"]["workers"] == "2 process(es)"
+                    # Both worker machines report in (their heartbeats start independently).
+                    deadline = time.monotonic() + 60
+                    while client._http.get("/readyz").json()["checks"]["workers"] != "2 process(es)":
+                        assert time.monotonic() < deadline, "the two workers never both reported"
+                        time.sleep(0.2)
                     jobs = [client.jobs.create(tracks=tracks[i % 4], options={"seed": i}) for i in range(20)]
                     results = [client.jobs.wait(j.id, timeout=180) for j in jobs]
                 assert [r.status for r in results] == ["succeeded"] * 20

@@ -11,7 +11,6 @@ import subprocess
 import sys
 import threading
 import time
-import uuid
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -67,30 +66,21 @@ def worker(
     database_url: Annotated[str | None, typer.Option()] = None,
 ) -> None:
     """Run queue workers (scale-out: on any machine sharing the store, queue and artifacts)."""
+    import multiprocessing
+
     from .jobs.queue import make_huey
-    from .jobs.runtime import get_runtime
-    from .jobs.service import JobService, Reaper
 
     _logging()
-    s = _settings(workers=workers, data_dir=data_dir, redis_url=redis_url, database_url=database_url)
-    rt = get_runtime(s)
-    huey, task = make_huey(s)
-    worker_id = f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-    stop = threading.Event()
-
-    def beat() -> None:
-        while not stop.is_set():
-            try:
-                rt.store.worker_heartbeat(worker_id, socket.gethostname(), s.workers)
-            except Exception:
-                logging.getLogger("tumblescan.worker").exception("worker heartbeat failed")
-            stop.wait(s.heartbeat_s)
-
-    threading.Thread(target=beat, daemon=True, name="worker-heartbeat").start()
-    reaper = Reaper(JobService(rt, task, huey.pending_count), s.reaper_interval_s)
-    reaper.start()
-    # The store's connections must not cross the consumer's fork; each worker reconnects.
-    rt.store.engine.dispose()
+    overrides = {"workers": workers, "data_dir": data_dir, "redis_url": redis_url, "database_url": database_url}
+    s = _settings(**overrides)
+    huey, _ = make_huey(s)
+    # This process forks the worker processes (now and whenever one dies), so it must never
+    # hold the job store open: SQLite's lock bookkeeping does not survive a fork. Heartbeat
+    # and reaper run in a separate, spawned process.
+    housekeeper = multiprocessing.get_context("spawn").Process(
+        target=housekeeping, args=({k: v for k, v in overrides.items() if v is not None}, os.getpid()), daemon=True
+    )
+    housekeeper.start()
     consumer = huey.create_consumer(
         workers=s.workers,
         worker_type="process",
@@ -102,8 +92,37 @@ def worker(
     try:
         consumer.run()
     finally:
-        stop.set()
-        reaper.stopped.set()
+        housekeeper.terminate()
+        housekeeper.join(timeout=10)
+
+
+def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
+    """Worker heartbeat (for /readyz) and the reaper, beside a consumer, until it is gone."""
+    from .jobs.queue import make_huey
+    from .jobs.runtime import get_runtime
+    from .jobs.service import JobService
+
+    _logging()
+    s = _settings(**overrides)
+    rt = get_runtime(s)
+    huey, task = make_huey(s)
+    service = JobService(rt, task, huey.pending_count)
+    worker_id = f"{socket.gethostname()}-{consumer_pid}"
+    log = logging.getLogger("tumblescan.worker")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    last_reap = 0.0
+    try:
+        while not stop.is_set() and os.getppid() == consumer_pid:
+            try:
+                rt.store.worker_heartbeat(worker_id, socket.gethostname(), s.workers)
+                if time.monotonic() - last_reap >= s.reaper_interval_s:
+                    last_reap = time.monotonic()
+                    service.reap_once()
+            except Exception:
+                log.exception("housekeeping pass failed")
+            stop.wait(min(s.heartbeat_s, s.reaper_interval_s))
+    finally:
         rt.store.worker_gone(worker_id)
 
 
