@@ -50,11 +50,14 @@ def _retry_delay(policy: RetryPolicy, attempt: int, resp: httpx.Response | None,
 
 
 def _upload_parts(
-    path: str | os.PathLike[str], cloud: str | os.PathLike[str] | None, options: dict[str, Any] | None, kind: str
+    path: str | os.PathLike[str],
+    extra: dict[str, str | os.PathLike[str] | None],
+    options: dict[str, Any] | None,
+    kind: str,
 ) -> tuple[dict[str, Any], dict[str, str]]:
-    files: dict[str, Any] = {"file": (Path(path).name, open(path, "rb"), "application/octet-stream")}  # noqa: SIM115 (closed by the caller)
-    if cloud is not None:
-        files["cloud"] = (Path(cloud).name, open(cloud, "rb"), "application/octet-stream")  # noqa: SIM115
+    """Multipart parts: ``file`` plus any of ``cloud``/``truth``; the caller closes the files."""
+    named = {"file": path} | {k: v for k, v in extra.items() if v is not None}
+    files = {k: (Path(v).name, open(v, "rb"), "application/octet-stream") for k, v in named.items()}  # noqa: SIM115
     return files, {"options": json.dumps(options or {}), "kind": kind}
 
 
@@ -99,12 +102,13 @@ class Jobs:
         path: str | os.PathLike[str],
         *,
         cloud: str | os.PathLike[str] | None = None,
+        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
         kind: str = "linescan-motion",
         timeout: float | None = None,
     ) -> Job:
         def send() -> httpx.Response:
-            files, data = _upload_parts(path, cloud, options, kind)
+            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
             try:
                 return self._c._http.request(
                     "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
@@ -147,16 +151,19 @@ class Jobs:
     def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
     ) -> Path:
+        """Stream the rectified cloud (PLY, or NPZ with ``format="npz"``) to ``path``."""
+        return self._download(f"/v1/jobs/{job_id}/cloud", {"format": format}, path, timeout)
+
+    def download_report(self, job_id: str, path: str | os.PathLike[str], *, timeout: float | None = None) -> Path:
+        """Save the job's self-contained HTML report to ``path``."""
+        return self._download(f"/v1/jobs/{job_id}/report", {}, path, timeout)
+
+    def _download(self, url: str, params: dict[str, Any], path: str | os.PathLike[str], timeout: float | None) -> Path:
         out = Path(path)
         tmp = out.with_name(out.name + ".part")
 
         def send() -> httpx.Response:
-            req = self._c._http.build_request(
-                "GET",
-                f"/v1/jobs/{job_id}/cloud",
-                params={"format": format},
-                timeout=timeout or httpx.USE_CLIENT_DEFAULT,
-            )
+            req = self._c._http.build_request("GET", url, params=params, timeout=timeout or httpx.USE_CLIENT_DEFAULT)
             resp = self._c._http.send(req, stream=True)
             if resp.status_code != 200:
                 resp.read()
@@ -255,12 +262,13 @@ class AsyncJobs:
         path: str | os.PathLike[str],
         *,
         cloud: str | os.PathLike[str] | None = None,
+        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
         kind: str = "linescan-motion",
         timeout: float | None = None,
     ) -> Job:
         async def send() -> httpx.Response:
-            files, data = _upload_parts(path, cloud, options, kind)
+            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
             try:
                 return await self._c._http.request(
                     "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
@@ -298,16 +306,19 @@ class AsyncJobs:
     async def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
     ) -> Path:
+        return await self._download(f"/v1/jobs/{job_id}/cloud", {"format": format}, path, timeout)
+
+    async def download_report(self, job_id: str, path: str | os.PathLike[str], *, timeout: float | None = None) -> Path:
+        return await self._download(f"/v1/jobs/{job_id}/report", {}, path, timeout)
+
+    async def _download(
+        self, url: str, params: dict[str, Any], path: str | os.PathLike[str], timeout: float | None
+    ) -> Path:
         out = Path(path)
         tmp = out.with_name(out.name + ".part")
 
         async def send() -> httpx.Response:
-            req = self._c._http.build_request(
-                "GET",
-                f"/v1/jobs/{job_id}/cloud",
-                params={"format": format},
-                timeout=timeout or httpx.USE_CLIENT_DEFAULT,
-            )
+            req = self._c._http.build_request("GET", url, params=params, timeout=timeout or httpx.USE_CLIENT_DEFAULT)
             resp = await self._c._http.send(req, stream=True)
             if resp.status_code != 200:
                 await resp.aread()

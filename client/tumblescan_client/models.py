@@ -82,6 +82,7 @@ class JobError(_Model):
 
 class JobArtifacts(_Model):
     cloud: str | None = None
+    report: str | None = None
 
 
 class Job(_Model):

@@ -22,6 +22,7 @@ from .rectify import rectify as rectify_points
 from .result import MotionResult
 from .sensor import Scanner, SensorNoise
 from .simulate import Scene, random_motion, simulate_frames, simulate_tracks
+from .tracks import Tracks
 from .tracks_io import read_tracks, write_tracks
 from .truth import motion_to_json
 
@@ -110,6 +111,13 @@ def estimate(
     range_sigma_m: Annotated[float | None, typer.Option(help="override the declared range noise")] = None,
     angle_sigma_arcsec: Annotated[float | None, typer.Option(help="override the declared angle noise")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
+    report: Annotated[Path | None, typer.Option(help="write the HTML report here")] = None,
+    cloud: Annotated[
+        Path | None, typer.Option(help="with --report: a PLY with per-point times to rectify and show")
+    ] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help="with --report: truth.json of a simulation, shown beside the estimate")
+    ] = None,
 ) -> None:
     """Estimate the motion from feature tracks and print it."""
     tracks = read_tracks(tracks_file)
@@ -124,6 +132,8 @@ def estimate(
         strategy=strategy, objective=objective, model=model, reference_time_s=reference_time_s, seed=seed, sensor=sensor
     )
     result = estimate_motion(tracks, options)
+    if report is not None:
+        write_report(report, result, tracks, cloud, truth)
     if as_json:
         sys.stdout.write(result.model_dump_json() + "\n")
     else:
@@ -145,6 +155,28 @@ def rectify(
     xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=target)
     write_ply(out, TimedCloud(xyz, cloud.t_s, cloud.fields))
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")
+
+
+def write_report(path: Path, result: MotionResult, tracks: Tracks, cloud: Path | None, truth: Path | None) -> None:
+    """The same report the service writes for a job."""
+    from .jobs.linescan import load_truth
+    from .report import ReportInputs, build_report
+
+    distorted = read_ply(cloud) if cloud is not None else None
+    rectified = None
+    if distorted is not None:
+        xyz = rectify_points(distorted.xyz_m, distorted.t_s, result.motion(), to_time_s=result.reference_time_s)
+        rectified = TimedCloud(xyz, distorted.t_s, distorted.fields)
+    inputs = ReportInputs(
+        result=result,
+        title=f"Motion estimate: {path.stem}",
+        tracks=tracks,
+        distorted=distorted,
+        rectified=rectified,
+        truth=load_truth(truth) if truth is not None else None,
+    )
+    path.write_text(build_report(inputs), encoding="utf-8")
+    typer.echo(f"wrote {path}", err=True)
 
 
 def load_result(path: Path) -> MotionResult:

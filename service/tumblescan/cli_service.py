@@ -31,6 +31,7 @@ def register(app: typer.Typer) -> None:
     app.command()(serve)
     app.command()(worker)
     app.command()(submit)
+    app.command()(report)
     app.command()(demo)
 
 
@@ -129,6 +130,7 @@ def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
 def submit(
     file: Annotated[Path, typer.Argument(help="tracks (JSON or CSV)")],
     cloud: Annotated[Path | None, typer.Option(help="PLY with per-point times to rectify")] = None,
+    truth: Annotated[Path | None, typer.Option(help="truth.json of a simulation, shown in the report")] = None,
     options: Annotated[str, typer.Option(help="job options as JSON")] = "{}",
     wait: Annotated[bool, typer.Option("--wait", help="wait for the result with a progress bar")] = False,
     out: Annotated[Path | None, typer.Option(help="with --wait: write the rectified cloud here")] = None,
@@ -149,7 +151,7 @@ def submit(
         raise typer.Exit(2)
     try:
         with Client(url, api_key=api_key) as client:
-            job = client.jobs.upload(file, cloud=cloud, options=opts)
+            job = client.jobs.upload(file, cloud=cloud, truth=truth, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
                 return
@@ -183,10 +185,29 @@ class ProgressBar:
         sys.stderr.flush()
 
 
+def report(
+    job_id: Annotated[str, typer.Argument(help="the job")],
+    out: Annotated[Path, typer.Option(help="where to write the HTML report")] = Path("report.html"),
+    url: Annotated[str | None, typer.Option(help="service URL (TUMBLESCAN_URL)")] = None,
+    api_key: Annotated[str | None, typer.Option(help="API key (TUMBLESCAN_API_KEY)")] = None,
+) -> None:
+    """Save a finished job's HTML report (self-contained, works offline)."""
+    from tumblescan_client import Client, TumblescanError
+
+    try:
+        with Client(url, api_key=api_key) as client:
+            client.jobs.download_report(job_id, out)
+    except TumblescanError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2 if getattr(exc, "status_code", 0) in (404, 409, 422) else 1) from None
+    typer.echo(f"wrote {out}")
+
+
 def demo(
     out: Annotated[Path, typer.Option(help="where the demo writes its files")] = Path("demo-output"),
     seed: Annotated[int, typer.Option(min=0)] = 7,
     port: Annotated[int, typer.Option(help="0: any free port")] = 0,
+    keep_serving: Annotated[bool, typer.Option(help="keep the service running afterwards (Ctrl-C stops it)")] = False,
 ) -> None:
     """Start the service on the embedded defaults, simulate a tumbling satellite, submit it,
     wait with a progress bar, print the estimate next to the truth, write the rectified cloud."""
@@ -199,6 +220,7 @@ def demo(
     from .result import MotionResult
     from .simulate import Scene, random_motion, simulate_frames, simulate_tracks
     from .tracks_io import write_tracks
+    from .truth import motion_to_json
 
     out.mkdir(parents=True, exist_ok=True)
     port = port or _free_port()
@@ -215,8 +237,11 @@ def demo(
         cloud = simulate_frames(motion, scene, seed=seed)
         write_tracks(out / "tracks.json", tracks)
         write_ply(out / "frames.ply", TimedCloud(cloud.xyz_m, cloud.t_s, {"frame": cloud.frame, "line": cloud.line}))
+        (out / "truth.json").write_text(json.dumps({"motion": motion_to_json(motion), "seed": seed}, indent=2))
         with Client(url) as client:
-            job = client.jobs.upload(out / "tracks.json", cloud=out / "frames.ply", options={"seed": seed})
+            job = client.jobs.upload(
+                out / "tracks.json", cloud=out / "frames.ply", truth=out / "truth.json", options={"seed": seed}
+            )
             typer.echo(f"submitted job {job.id}")
             job = client.jobs.wait(job.id, timeout=600, on_progress=ProgressBar())
             typer.echo("")
@@ -225,6 +250,7 @@ def demo(
                 raise typer.Exit(1)
             result = MotionResult.model_validate(job.result)
             client.jobs.download_cloud(job.id, out / "rectified.ply")
+            client.jobs.download_report(job.id, out / "report.html")
         (out / "result.json").write_text(result.model_dump_json(indent=2))
         typer.echo(comparison_table(result, motion))
         rect = read_ply(out / "rectified.ply")
@@ -238,6 +264,12 @@ def demo(
             f"{err_mm:.1f} mm (2 cm sensor noise included)"
         )
         typer.echo(f"wrote {out / 'rectified.ply'}, {out / 'result.json'}, {out / 'tracks.json'}, {out / 'frames.ply'}")
+        typer.echo(f"report: {url}/jobs/{job.id} (written to {out / 'report.html'})")
+        if keep_serving:
+            typer.echo(f"serving at {url} (job list at {url}/); Ctrl-C stops")
+            server.wait()
+        else:
+            typer.echo("the service stops with the demo; --keep-serving keeps it up to browse the report there")
     finally:
         server.send_signal(signal.SIGINT)
         try:

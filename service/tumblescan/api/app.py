@@ -19,7 +19,7 @@ from ..jobs.service import JobService, Reaper
 from ..settings import Settings, get_settings
 from . import errors
 from .deps import key_id
-from .routes import health, jobs
+from .routes import health, jobs, pages
 
 log = logging.getLogger("tumblescan.api")
 
@@ -97,4 +97,5 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
     errors.install(app)
     app.include_router(jobs.router)
     app.include_router(health.router)
+    app.include_router(pages.router)
     return app

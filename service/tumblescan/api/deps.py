@@ -27,14 +27,24 @@ def key_id(key: str) -> str:
     return hashlib.sha256(key.encode()).hexdigest()[:32]
 
 
+KEY_COOKIE = "tumblescan_key"
+
+
+def presented_key(request: Request) -> str:
+    """``Authorization: Bearer <key>``; for pages opened in a browser also the cookie or ``?api_key=``."""
+    scheme, _, key = request.headers.get("authorization", "").partition(" ")
+    if scheme.lower() == "bearer" and key.strip():
+        return key.strip()
+    return request.cookies.get(KEY_COOKIE) or request.query_params.get("api_key") or ""
+
+
 def get_owner(request: Request) -> str | None:
     """The caller's key id when API keys are configured (401 without a valid one), else None."""
     hashes: list[str] = request.app.state.key_hashes
     if not hashes:
         return None
-    header = request.headers.get("authorization", "")
-    scheme, _, key = header.partition(" ")
-    if scheme.lower() != "bearer" or not key:
+    key = presented_key(request)
+    if not key:
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
             "missing API key (Authorization: Bearer <key>)",

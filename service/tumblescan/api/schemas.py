@@ -29,6 +29,7 @@ class JobError(BaseModel):
 
 class JobArtifacts(BaseModel):
     cloud: str | None = Field(None, description="URL of the rectified cloud (binary PLY)")
+    report: str | None = Field(None, description="URL of the HTML report")
 
 
 class JobPublic(BaseModel):
@@ -46,7 +47,11 @@ class JobPublic(BaseModel):
 
     @classmethod
     def from_job(cls, job: Job, base_url: str) -> JobPublic:
-        cloud = f"{base_url}/v1/jobs/{job.id}/cloud" if "cloud" in job.artifacts and not job.artifacts_deleted else None
+        def link(name: str) -> str | None:
+            return (
+                f"{base_url}/v1/jobs/{job.id}/{name}" if name in job.artifacts and not job.artifacts_deleted else None
+            )
+
         return cls(
             id=job.id,
             kind=job.kind,
@@ -58,7 +63,7 @@ class JobPublic(BaseModel):
             finished_at=_ts(job.finished_at),
             error=JobError(code=job.error_code, message=job.error_message or "") if job.error_code else None,
             result=job.result,
-            artifacts=JobArtifacts(cloud=cloud),
+            artifacts=JobArtifacts(cloud=link("cloud"), report=link("report")),
         )
 
 

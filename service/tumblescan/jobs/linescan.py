@@ -13,8 +13,11 @@ from pydantic import BaseModel
 from ..cloud_io import TimedCloud, read_ply, write_ply
 from ..errors import InputError, MalformedInputError
 from ..estimate import EstimateOptions, estimate_motion
+from ..motion import Motion
 from ..rectify import rectify
+from ..report import ReportInputs, build_report
 from ..tracks_io import read_tracks, tracks_from_json
+from ..truth import motion_from_json
 from .kinds import JobContext, JobOutput, register
 
 TRACKS_FILE = "input-tracks"
@@ -34,7 +37,7 @@ class LinescanMotion:
         return {"tracks": TRACKS_FILE + ".json"}
 
     def accept_files(self, files: dict[str, Path]) -> dict[str, str]:
-        unknown = sorted(set(files) - {"file", "cloud"})
+        unknown = sorted(set(files) - {"file", "cloud", "truth"})
         if unknown:
             raise MalformedInputError(f"unknown upload field(s): {', '.join(unknown)}", field=unknown[0])
         if "file" not in files:
@@ -53,6 +56,9 @@ class LinescanMotion:
                 raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
             read_ply(files["cloud"])
             accepted["cloud"] = files["cloud"].name
+        if "truth" in files:
+            load_truth(files["truth"])
+            accepted["truth"] = files["truth"].name
         return accepted
 
     def run(self, ctx: JobContext) -> JobOutput:
@@ -64,14 +70,41 @@ class LinescanMotion:
         result = estimate_motion(tracks, options, progress=lambda stage, f: ctx.progress(stage, 0.05 + 0.75 * f))
         artifacts: dict[str, str] = {}
         # 3. Rectify the cloud, if one came with the tracks.
+        distorted = rectified = None
         if "cloud" in ctx.inputs:
             ctx.progress("rectifying", 0.85)
-            cloud = read_ply(ctx.inputs["cloud"])
-            xyz = rectify(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
-            ctx.progress("writing", 0.95)
-            write_ply(ctx.output_path("cloud.ply"), TimedCloud(xyz, cloud.t_s, cloud.fields))
+            distorted = read_ply(ctx.inputs["cloud"])
+            xyz = rectify(distorted.xyz_m, distorted.t_s, result.motion(), to_time_s=result.reference_time_s)
+            rectified = TimedCloud(xyz, distorted.t_s, distorted.fields)
+            ctx.progress("writing", 0.9)
+            write_ply(ctx.output_path("cloud.ply"), rectified)
             artifacts["cloud"] = "cloud.ply"
+        # 4. The report (truth beside the estimate when the input was simulated).
+        ctx.progress("reporting", 0.95)
+        truth = load_truth(ctx.inputs["truth"]) if "truth" in ctx.inputs else None
+        page = build_report(
+            ReportInputs(
+                result=result,
+                title=f"Job {ctx.job_id}",
+                tracks=tracks,
+                distorted=distorted,
+                rectified=rectified,
+                truth=truth,
+            )
+        )
+        ctx.output_path("report.html").write_text(page, encoding="utf-8")
+        artifacts["report"] = "report.html"
         return JobOutput(result=result.model_dump(mode="json"), artifacts=artifacts)
+
+
+def load_truth(path: Path) -> Motion:
+    """The ``motion`` of a ``truth.json`` written by ``tumblescan simulate``."""
+    try:
+        return motion_from_json(json.loads(path.read_text())["motion"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise MalformedInputError(
+            f"'truth' is not a simulation truth file ({type(exc).__name__}: {exc})", field="truth"
+        ) from None
 
 
 def sniff(path: Path) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import tempfile
 import time
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -55,6 +56,9 @@ def upload_job(
     owner: OwnerDep,
     file: Annotated[UploadFile, File(description="tracks (JSON or CSV)")],
     cloud: Annotated[UploadFile | None, File(description="optional PLY with per-point times to rectify")] = None,
+    truth: Annotated[
+        UploadFile | None, File(description="optional truth.json of a simulation, shown in the report")
+    ] = None,
     options: Annotated[str, Form(description="the kind's options as a JSON object")] = "{}",
     kind: Annotated[str, Form()] = "linescan-motion",
 ) -> JobPublic:
@@ -65,7 +69,7 @@ def upload_job(
         raise MalformedInputError(f"options is not valid JSON: {exc.msg}", field="options") from None
     if not isinstance(opts, dict):
         raise MalformedInputError("options must be a JSON object", field="options")
-    files = {"file": file.file} | ({"cloud": cloud.file} if cloud is not None else {})
+    files = {"file": file.file} | {name: f.file for name, f in (("cloud", cloud), ("truth", truth)) if f is not None}
     job = service.submit_upload(kind, files, opts, owner)
     return accepted(job, request, response)
 
@@ -147,6 +151,30 @@ def get_job_cloud(
         filename=f"{job_id}-rectified.npz",
         background=BackgroundTask(_unlink, tmp.name),
     )
+
+
+@router.get(
+    "/{job_id}/report",
+    responses={
+        **ERRORS,
+        200: {"content": {"text/html": {}}, "description": "self-contained HTML"},
+        409: {"model": ErrorBody},
+    },
+    response_class=FileResponse,
+)
+def get_job_report(job_id: str, service: ServiceDep, owner: OwnerDep) -> FileResponse:
+    """The job's report: one self-contained HTML file that works offline."""
+    return FileResponse(report_path(service, _found(service.get(job_id, owner), job_id)), media_type="text/html")
+
+
+def report_path(service: ServiceDep, job: Job) -> Path:
+    if job.status != "succeeded":
+        raise HTTPException(
+            status.HTTP_409_CONFLICT, f"job {job.id} is {job.status}; its report exists once it has succeeded"
+        )
+    if "report" not in job.artifacts or job.artifacts_deleted:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job.id} has no report")
+    return service.artifacts.path(job.id, job.artifacts["report"])
 
 
 @router.delete("/{job_id}", responses=ERRORS)
