@@ -53,6 +53,14 @@ def serve(
     s = _settings(
         host=host, port=port, workers=workers, data_dir=data_dir, redis_url=redis_url, database_url=database_url
     )
+    problem = s.open_access_problem()
+    if problem:
+        typer.echo(f"error: {problem}", err=True)
+        raise typer.Exit(2)
+    if not (s.api_keys or s.admin_keys):
+        typer.echo(
+            f"tumblescan: no API keys configured: anyone who can reach {s.host}:{s.port} may use the service", err=True
+        )
     n = 0 if no_workers else s.workers
     typer.echo(
         f"tumblescan: serving on http://{s.host}:{s.port} with {n} worker process(es); data in {s.data_dir}", err=True

@@ -55,3 +55,7 @@ class MissingTimeError(InputError):
 
 class InvalidOptionError(InputError):
     code = "invalid_option"
+
+
+class LimitExceededError(InputError):
+    code = "limit_exceeded"

@@ -33,6 +33,13 @@ class Settings(BaseSettings):
     api_keys: Annotated[list[SecretStr], NoDecode] = Field(
         default_factory=list, description="accepted Bearer keys (comma-separated in the environment)"
     )
+    admin_keys: Annotated[list[SecretStr], NoDecode] = Field(
+        default_factory=list, description="keys that may also list and cancel every job (comma-separated)"
+    )
+    allow_unauthenticated: bool = Field(False, description="serve beyond localhost without API keys (not recommended)")
+    job_timeout_s: float = Field(600.0, gt=0, description="a job running longer fails with code 'timeout'")
+    max_observations: int = Field(1_000_000, gt=0, description="largest tracks input accepted")
+    max_cloud_points: int = Field(50_000_000, gt=0, description="largest cloud accepted")
     public_url: str | None = Field(None, description="base URL used in links; default from the request")
     heartbeat_s: float = Field(2.0, gt=0, description="how often a running job proves its worker alive")
     lease_s: float = Field(20.0, gt=0, description="a running job silent for this long has lost its worker")
@@ -42,12 +49,23 @@ class Settings(BaseSettings):
     poll_initial_delay_s: float = Field(0.01, gt=0)
     poll_max_delay_s: float = Field(0.1, gt=0)
 
-    @field_validator("api_keys", mode="before")
+    @field_validator("api_keys", "admin_keys", mode="before")
     @classmethod
     def _split_keys(cls, v: object) -> object:
         if isinstance(v, str):
             return [k.strip() for k in v.split(",") if k.strip()]
         return v
+
+    def open_access_problem(self) -> str | None:
+        """Why serving with these settings would expose an open service, or None."""
+        if self.api_keys or self.admin_keys or self.allow_unauthenticated:
+            return None
+        if self.host in ("127.0.0.1", "localhost", "::1"):
+            return None
+        return (
+            f"refusing to serve on {self.host} without API keys: set TUMBLESCAN_API_KEYS, or "
+            "TUMBLESCAN_ALLOW_UNAUTHENTICATED=true to accept that anyone who can reach it may use it"
+        )
 
     @property
     def artifacts(self) -> Path:

@@ -19,6 +19,7 @@ from ..jobs.service import JobService, Reaper
 from ..settings import Settings, get_settings
 from . import errors
 from .deps import key_id
+from .limits import BodyLimit
 from .routes import health, jobs, pages
 
 log = logging.getLogger("tumblescan.api")
@@ -71,7 +72,9 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
         huey, task = make_huey(s)
         service = JobService(rt, task, huey.pending_count)
         app.state.service, app.state.settings = service, s
+        # Keys are kept only as hashes; the settings object holds them as secrets (never logged).
         app.state.key_hashes = [key_id(k.get_secret_value()) for k in s.api_keys]
+        app.state.admin_hashes = [key_id(k.get_secret_value()) for k in s.admin_keys]
         reaper = Reaper(service, s.reaper_interval_s)
         reaper.start()
         consumer = start_workers(s, embedded_workers) if embedded_workers > 0 else None
@@ -95,6 +98,7 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
         generate_unique_id_function=lambda route: route.name,
     )
     errors.install(app)
+    app.add_middleware(BodyLimit, max_bytes=s.max_upload_bytes)
     app.include_router(jobs.router)
     app.include_router(health.router)
     app.include_router(pages.router)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, status
@@ -38,11 +39,25 @@ def presented_key(request: Request) -> str:
     return request.cookies.get(KEY_COOKIE) or request.query_params.get("api_key") or ""
 
 
-def get_owner(request: Request) -> str | None:
-    """The caller's key id when API keys are configured (401 without a valid one), else None."""
-    hashes: list[str] = request.app.state.key_hashes
-    if not hashes:
-        return None
+@dataclass(frozen=True)
+class Caller:
+    """Who is asking: the key id new jobs are recorded under, and whether it sees every job."""
+
+    key_id: str | None
+    admin: bool
+
+    @property
+    def scope(self) -> str | None:
+        """The owner filter for reads and cancellations (None: all jobs)."""
+        return None if self.admin else self.key_id
+
+
+def get_caller(request: Request) -> Caller:
+    """The caller when keys are configured (401 without a valid one); open access otherwise."""
+    users: list[str] = request.app.state.key_hashes
+    admins: list[str] = request.app.state.admin_hashes
+    if not users and not admins:
+        return Caller(None, admin=True)
     key = presented_key(request)
     if not key:
         raise HTTPException(
@@ -50,12 +65,14 @@ def get_owner(request: Request) -> str | None:
             "missing API key (Authorization: Bearer <key>)",
             headers={"WWW-Authenticate": "Bearer"},
         )
-    kid = key_id(key.strip())
-    if not any(hmac.compare_digest(kid, h) for h in hashes):
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid API key", headers={"WWW-Authenticate": "Bearer"})
-    return kid
+    kid = key_id(key)
+    if any(hmac.compare_digest(kid, h) for h in admins):
+        return Caller(kid, admin=True)
+    if any(hmac.compare_digest(kid, h) for h in users):
+        return Caller(kid, admin=False)
+    raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid API key", headers={"WWW-Authenticate": "Bearer"})
 
 
 ServiceDep = Annotated[JobService, Depends(get_service)]
-OwnerDep = Annotated[str | None, Depends(get_owner)]
+CallerDep = Annotated[Caller, Depends(get_caller)]
 SettingsDep = Annotated[Settings, Depends(get_settings_dep)]

@@ -53,15 +53,19 @@ def install(app: FastAPI) -> None:
     async def _queue(_: Request, exc: QueueUnavailableError) -> JSONResponse:
         return error_response(503, "queue_unavailable", f"the job queue is unavailable, retry later ({exc})")
 
+    @app.exception_handler(OSError)
+    async def _storage(_: Request, exc: OSError) -> JSONResponse:
+        # The artifact directory is unwritable or full; nothing of the submission was kept.
+        return error_response(507, "storage_unavailable", f"the service cannot store files: {exc.strerror or exc}")
+
     @app.exception_handler(OperationalError)
     async def _db(_: Request, exc: OperationalError) -> JSONResponse:
         return error_response(503, "store_unavailable", "the job store is unavailable, retry later")
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
-        code = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 409: "conflict"}.get(
-            exc.status_code, "http_error"
-        )
+        codes = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 409: "conflict"}
+        code = codes.get(exc.status_code, "http_error")
         resp = error_response(exc.status_code, code, str(exc.detail))
         for k, v in (exc.headers or {}).items():
             resp.headers[k] = v

@@ -30,6 +30,14 @@ class JobContext:
         self.report(stage, fraction)
 
 
+@dataclass(frozen=True)
+class Limits:
+    """Input sizes a deployment accepts."""
+
+    max_observations: int
+    max_cloud_points: int
+
+
 @dataclass
 class JobOutput:
     result: dict[str, Any]
@@ -40,11 +48,11 @@ class JobKind(Protocol):
     name: str
     options_model: type[BaseModel]
 
-    def accept_json(self, payload: Any, save: Callable[[str, bytes], Path]) -> dict[str, str]:
+    def accept_json(self, payload: Any, save: Callable[[str, bytes], Path], limits: Limits) -> dict[str, str]:
         """Validate a JSON ``input``; store what the job needs; return input name -> file name."""
         ...
 
-    def accept_files(self, files: dict[str, Path]) -> dict[str, str]:
+    def accept_files(self, files: dict[str, Path], limits: Limits) -> dict[str, str]:
         """Validate uploaded files (already stored); return input name -> file name."""
         ...
 

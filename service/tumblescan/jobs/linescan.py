@@ -11,14 +11,15 @@ from typing import Any
 from pydantic import BaseModel
 
 from ..cloud_io import TimedCloud, read_ply, write_ply
-from ..errors import InputError, MalformedInputError
+from ..errors import InputError, LimitExceededError, MalformedInputError
 from ..estimate import EstimateOptions, estimate_motion
 from ..motion import Motion
 from ..rectify import rectify
 from ..report import ReportInputs, build_report
+from ..tracks import Tracks
 from ..tracks_io import read_tracks, tracks_from_json
 from ..truth import motion_from_json
-from .kinds import JobContext, JobOutput, register
+from .kinds import JobContext, JobOutput, Limits, register
 
 TRACKS_FILE = "input-tracks"
 CLOUD_FILE = "input-cloud.ply"
@@ -28,15 +29,15 @@ class LinescanMotion:
     name = "linescan-motion"
     options_model: type[BaseModel] = EstimateOptions
 
-    def accept_json(self, payload: Any, save: Callable[[str, bytes], Path]) -> dict[str, str]:
+    def accept_json(self, payload: Any, save: Callable[[str, bytes], Path], limits: Limits) -> dict[str, str]:
         if not isinstance(payload, dict) or set(payload) != {"tracks"}:
             keys = sorted(payload) if isinstance(payload, dict) else []
             raise MalformedInputError(f'input must be {{"tracks": ...}}; got keys {keys}', field="input")
-        tracks_from_json(payload["tracks"])  # full validation before the job is accepted
+        _check_tracks(tracks_from_json(payload["tracks"]), limits)  # validated in full before the job is accepted
         save(TRACKS_FILE + ".json", json.dumps(payload["tracks"]).encode())
         return {"tracks": TRACKS_FILE + ".json"}
 
-    def accept_files(self, files: dict[str, Path]) -> dict[str, str]:
+    def accept_files(self, files: dict[str, Path], limits: Limits) -> dict[str, str]:
         unknown = sorted(set(files) - {"file", "cloud", "truth"})
         if unknown:
             raise MalformedInputError(f"unknown upload field(s): {', '.join(unknown)}", field=unknown[0])
@@ -49,12 +50,16 @@ class LinescanMotion:
                 "is not available yet; upload tracks (JSON or CSV) as 'file' and the cloud as 'cloud' to rectify it",
                 field="file",
             )
-        read_tracks(files["file"])
+        _check_tracks(read_tracks(files["file"]), limits)
         accepted = {"tracks": files["file"].name}
         if "cloud" in files:
             if sniff(files["cloud"]) != "ply":
                 raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
-            read_ply(files["cloud"])
+            points = len(read_ply(files["cloud"]))
+            if points > limits.max_cloud_points:
+                raise LimitExceededError(
+                    f"cloud has {points} points; the limit is {limits.max_cloud_points}", field="cloud"
+                )
             accepted["cloud"] = files["cloud"].name
         if "truth" in files:
             load_truth(files["truth"])
@@ -95,6 +100,13 @@ class LinescanMotion:
         ctx.output_path("report.html").write_text(page, encoding="utf-8")
         artifacts["report"] = "report.html"
         return JobOutput(result=result.model_dump(mode="json"), artifacts=artifacts)
+
+
+def _check_tracks(tracks: Tracks, limits: Limits) -> None:
+    if len(tracks) > limits.max_observations:
+        raise LimitExceededError(
+            f"{len(tracks)} observations; the limit is {limits.max_observations}", field="observations"
+        )
 
 
 def load_truth(path: Path) -> Motion:

@@ -14,6 +14,12 @@ from .kinds import JobCancelledError, JobContext, get_kind
 from .runtime import Runtime
 
 log = logging.getLogger("tumblescan.worker")
+
+
+class JobTimeoutError(Exception):
+    """The job outran ``job_timeout_s``; raised at its next progress report."""
+
+
 # Progress is written at most this often; cancellation is still checked at every report.
 PROGRESS_INTERVAL_S = 0.2
 
@@ -44,10 +50,13 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
     lease = _Lease(rt, job_id)
     lease.start()
     last_write = [0.0]
+    deadline = time.monotonic() + rt.settings.job_timeout_s
 
     def report(stage: str, fraction: float) -> None:
         if lease.cancelled.is_set():
             raise JobCancelledError
+        if time.monotonic() > deadline:
+            raise JobTimeoutError(f"the job ran longer than its limit of {rt.settings.job_timeout_s:g} s (at {stage})")
         now = time.monotonic()
         if now - last_write[0] >= PROGRESS_INTERVAL_S:
             last_write[0] = now
@@ -69,6 +78,9 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
         if rt.store.succeed(job_id, out.result, out.artifacts):
             return "succeeded"
         raise JobCancelledError  # cancelled between the last check and the result
+    except JobTimeoutError as exc:
+        rt.store.fail(job_id, "timeout", str(exc))
+        return "failed"
     except JobCancelledError:
         rt.store.mark_cancelled(job_id)
         rt.artifacts.delete(job_id)

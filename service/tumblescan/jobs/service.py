@@ -10,7 +10,7 @@ from typing import Any, BinaryIO
 from pydantic import ValidationError
 
 from ..errors import InputError
-from .kinds import get_kind, kind_names
+from .kinds import Limits, get_kind, kind_names
 from .runtime import Runtime
 from .store import FINAL, Job, new_id
 
@@ -40,6 +40,8 @@ class JobService:
         self.artifacts = rt.artifacts
         self._enqueue = enqueue
         self._pending = pending
+        s = rt.settings
+        self.limits = Limits(max_observations=s.max_observations, max_cloud_points=s.max_cloud_points)
 
     # Submission.
 
@@ -47,7 +49,9 @@ class JobService:
         kind, opts = self._kind_and_options(kind_name, options)
         job_id = new_id()
         try:
-            inputs = kind.accept_json(payload, lambda name, data: self.artifacts.save_bytes(job_id, name, data))
+            inputs = kind.accept_json(
+                payload, lambda name, data: self.artifacts.save_bytes(job_id, name, data), self.limits
+            )
         except BaseException:
             self.artifacts.delete(job_id)
             raise
@@ -65,7 +69,7 @@ class JobService:
                 )
                 for field, src in files.items()
             }
-            inputs = kind.accept_files(stored)
+            inputs = kind.accept_files(stored, self.limits)
         except BaseException:
             self.artifacts.delete(job_id)
             raise

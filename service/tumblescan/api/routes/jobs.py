@@ -16,7 +16,7 @@ from starlette.background import BackgroundTask
 from ...cloud_io import read_ply
 from ...errors import MalformedInputError
 from ...jobs.store import FINAL, Job
-from ..deps import OwnerDep, ServiceDep
+from ..deps import CallerDep, ServiceDep
 from ..schemas import ErrorBody, JobCreate, JobList, JobPublic, Status
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
@@ -41,10 +41,10 @@ def accepted(job: Job, request: Request, response: Response) -> JobPublic:
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, responses=ERRORS)
 def create_job(
-    body: JobCreate, request: Request, response: Response, service: ServiceDep, owner: OwnerDep
+    body: JobCreate, request: Request, response: Response, service: ServiceDep, caller: CallerDep
 ) -> JobPublic:
     """Queue a job from JSON input (``{"tracks": ...}`` for linescan-motion)."""
-    job = service.submit_json(body.kind, body.input, body.options, owner)
+    job = service.submit_json(body.kind, body.input, body.options, caller.key_id)
     return accepted(job, request, response)
 
 
@@ -53,7 +53,7 @@ def upload_job(
     request: Request,
     response: Response,
     service: ServiceDep,
-    owner: OwnerDep,
+    caller: CallerDep,
     file: Annotated[UploadFile, File(description="tracks (JSON or CSV)")],
     cloud: Annotated[UploadFile | None, File(description="optional PLY with per-point times to rectify")] = None,
     truth: Annotated[
@@ -70,7 +70,7 @@ def upload_job(
     if not isinstance(opts, dict):
         raise MalformedInputError("options must be a JSON object", field="options")
     files = {"file": file.file} | {name: f.file for name, f in (("cloud", cloud), ("truth", truth)) if f is not None}
-    job = service.submit_upload(kind, files, opts, owner)
+    job = service.submit_upload(kind, files, opts, caller.key_id)
     return accepted(job, request, response)
 
 
@@ -78,14 +78,14 @@ def upload_job(
 def list_jobs(
     request: Request,
     service: ServiceDep,
-    owner: OwnerDep,
+    caller: CallerDep,
     status_: Annotated[Status | None, Query(alias="status")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     cursor: Annotated[str | None, Query(max_length=200)] = None,
 ) -> JobList:
     """Jobs newest first, optionally by status; follow ``next_cursor`` for more."""
     try:
-        jobs, nxt = service.list(status=status_, owner=owner, limit=limit, cursor=cursor)
+        jobs, nxt = service.list(status=status_, owner=caller.scope, limit=limit, cursor=cursor)
     except ValueError as exc:
         raise MalformedInputError(str(exc), field="cursor") from None
     return JobList(items=[public(j, request) for j in jobs], next_cursor=nxt)
@@ -96,12 +96,12 @@ def get_job(
     job_id: str,
     request: Request,
     service: ServiceDep,
-    owner: OwnerDep,
+    caller: CallerDep,
     wait: Annotated[float, Query(ge=0, le=30, description="long poll: hold up to this many seconds for a change")] = 0,
 ) -> JobPublic:
     """A job's status, progress, result and artifact links. With ``wait`` the answer comes as
     soon as the job's status, stage or progress changes, or when ``wait`` runs out."""
-    job = _found(service.get(job_id, owner), job_id)
+    job = _found(service.get(job_id, caller.scope), job_id)
     deadline = time.monotonic() + wait
     seen = (job.status, job.stage, job.progress)
     interval = LONG_POLL_FIRST_S
@@ -109,7 +109,7 @@ def get_job(
         time.sleep(interval)
         # Quick jobs are seen within milliseconds; many waiting clients don't flood the store.
         interval = min(interval * 1.5, LONG_POLL_MAX_S)
-        job = _found(service.get(job_id, owner), job_id)
+        job = _found(service.get(job_id, caller.scope), job_id)
         if (job.status, job.stage, job.progress) != seen:
             break
     return public(job, request)
@@ -125,10 +125,10 @@ def get_job(
     response_class=FileResponse,
 )
 def get_job_cloud(
-    job_id: str, service: ServiceDep, owner: OwnerDep, format: Annotated[Literal["ply", "npz"], Query()] = "ply"
+    job_id: str, service: ServiceDep, caller: CallerDep, format: Annotated[Literal["ply", "npz"], Query()] = "ply"
 ) -> FileResponse:
     """The rectified cloud: binary PLY (default) or NPZ (``xyz_m``, ``t_s`` and every other field)."""
-    job = _found(service.get(job_id, owner), job_id)
+    job = _found(service.get(job_id, caller.scope), job_id)
     if job.status != "succeeded":
         raise HTTPException(
             status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; the cloud exists once it has succeeded"
@@ -162,9 +162,9 @@ def get_job_cloud(
     },
     response_class=FileResponse,
 )
-def get_job_report(job_id: str, service: ServiceDep, owner: OwnerDep) -> FileResponse:
+def get_job_report(job_id: str, service: ServiceDep, caller: CallerDep) -> FileResponse:
     """The job's report: one self-contained HTML file that works offline."""
-    return FileResponse(report_path(service, _found(service.get(job_id, owner), job_id)), media_type="text/html")
+    return FileResponse(report_path(service, _found(service.get(job_id, caller.scope), job_id)), media_type="text/html")
 
 
 def report_path(service: ServiceDep, job: Job) -> Path:
@@ -178,10 +178,10 @@ def report_path(service: ServiceDep, job: Job) -> Path:
 
 
 @router.delete("/{job_id}", responses=ERRORS)
-def cancel_job(job_id: str, request: Request, service: ServiceDep, owner: OwnerDep) -> JobPublic:
+def cancel_job(job_id: str, request: Request, service: ServiceDep, caller: CallerDep) -> JobPublic:
     """Cancel a queued or running job (a running one stops at its next check, within seconds);
     its files are deleted once it has stopped. Finished jobs are returned unchanged."""
-    return public(_found(service.cancel(job_id, owner), job_id), request)
+    return public(_found(service.cancel(job_id, caller.scope), job_id), request)
 
 
 def _found(job: Job | None, job_id: str) -> Job:

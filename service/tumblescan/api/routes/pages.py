@@ -10,7 +10,7 @@ from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from ...jobs.service import JobService
 from ...jobs.store import FINAL, Job
-from ..deps import KEY_COOKIE, ServiceDep, get_owner
+from ..deps import KEY_COOKIE, ServiceDep, get_caller
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 PAGE_SIZE = 100
@@ -28,8 +28,9 @@ def page(title: str, body: str, *, status_code: int = 200, refresh_s: int | None
 
 
 def _owner(request: Request) -> str | HTMLResponse | None:
+    """The caller's job scope, or a 401 page."""
     try:
-        return get_owner(request)
+        return get_caller(request).scope
     except HTTPException:
         body = (
             "<h1>API key required</h1><p>Open this page with <code>?api_key=&lt;your key&gt;</code> once; "
