@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import tempfile
 import time
@@ -10,6 +11,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, Response, UploadFile, status
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
@@ -92,7 +94,7 @@ def list_jobs(
 
 
 @router.get("/{job_id}", responses=ERRORS)
-def get_job(
+async def get_job(
     job_id: str,
     request: Request,
     service: ServiceDep,
@@ -101,15 +103,17 @@ def get_job(
 ) -> JobPublic:
     """A job's status, progress, result and artifact links. With ``wait`` the answer comes as
     soon as the job's status, stage or progress changes, or when ``wait`` runs out."""
-    job = _found(service.get(job_id, caller.scope), job_id)
+    # Store reads go to the thread pool; the waiting happens on the event loop, so many
+    # waiting clients hold no threads.
+    job = _found(await run_in_threadpool(service.get, job_id, caller.scope), job_id)
     deadline = time.monotonic() + wait
     seen = (job.status, job.stage, job.progress)
     interval = LONG_POLL_FIRST_S
     while job.status not in FINAL and time.monotonic() < deadline:
-        time.sleep(interval)
+        await asyncio.sleep(interval)
         # Quick jobs are seen within milliseconds; many waiting clients don't flood the store.
         interval = min(interval * 1.5, LONG_POLL_MAX_S)
-        job = _found(service.get(job_id, caller.scope), job_id)
+        job = _found(await run_in_threadpool(service.get, job_id, caller.scope), job_id)
         if (job.status, job.stage, job.progress) != seen:
             break
     return public(job, request)
