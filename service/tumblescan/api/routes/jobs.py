@@ -24,7 +24,7 @@ from ..schemas import ErrorBody, JobCreate, JobList, JobPublic, Status
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 LONG_POLL_FIRST_S = 0.01
 LONG_POLL_MAX_S = 0.25
-ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (401, 404, 413, 422, 503)}
+ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 401, 404, 413, 422, 503, 507)}
 
 
 def base_url(request: Request) -> str:
