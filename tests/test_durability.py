@@ -68,3 +68,45 @@ def test_a_job_whose_worker_is_killed_runs_again_on_another(tmp_path: Path) -> N
         assert done["status"] == "succeeded"
         job = store.get(job_id)
         assert job is not None and job.attempts == 2 and job.worker != victim
+
+
+def test_a_job_whose_last_attempt_dies_fails_as_worker_lost(tmp_path: Path) -> None:
+    env = {
+        "TUMBLESCAN_LEASE_S": "3",
+        "TUMBLESCAN_HEARTBEAT_S": "0.5",
+        "TUMBLESCAN_REAPER_INTERVAL_S": "0.5",
+        "TUMBLESCAN_MAX_ATTEMPTS": "1",
+    }
+    data = tmp_path / "data"
+    with serve(data, workers=2, extra_env=env) as url, httpx.Client(base_url=url, timeout=30) as http:
+        job_id = submit(http, 91, SLOWISH)
+        wait_status(http, job_id, ("running",), 60)
+        worker = JobStore(f"sqlite:///{data / 'jobs.db'}").get(job_id).worker  # type: ignore[union-attr]
+        os.kill(int(str(worker).rsplit(":", 1)[1]), signal.SIGKILL)
+        done = wait_status(http, job_id, FINAL, 60)
+        assert done["status"] == "failed" and done["error"]["code"] == "worker_lost"  # type: ignore[index]
+        # The pool recovers: the next job runs.
+        assert wait_status(http, submit(http, 92, {}), FINAL, 120)["status"] == "succeeded"
+
+
+def test_a_running_job_whose_files_vanish_fails_clearly(tmp_path: Path) -> None:
+    import json
+
+    import numpy as np
+
+    from tumblescan import TimedCloud, write_ply
+
+    data = tmp_path / "data"
+    cloud = tmp_path / "c.ply"
+    write_ply(cloud, TimedCloud(np.random.default_rng(0).normal(size=(1000, 3)) + [0, 0, 50], np.linspace(0, 14, 1000)))
+    tracks = json.dumps(tracks_to_json(tracks_for(93)[1])).encode()
+    with serve(data, workers=1) as url, httpx.Client(base_url=url, timeout=30) as http:
+        files = {"file": ("t.json", tracks), "cloud": ("c.ply", cloud.read_bytes())}
+        job_id = http.post("/v1/jobs/upload", files=files, data={"options": json.dumps(SLOWISH)}).json()["id"]
+        wait_status(http, job_id, ("running",), 60)
+        job_dir = data / "artifacts" / job_id
+        job_dir.rename(tmp_path / "gone")
+        job_dir.write_text("the directory is gone")  # writes under it fail, even for root
+        done = wait_status(http, job_id, FINAL, 120)
+        assert done["status"] == "failed" and done["error"]["code"] == "storage_error"  # type: ignore[index]
+        assert http.get("/healthz").status_code == 200
