@@ -1,4 +1,6 @@
 # Tumblescan service: API plus embedded workers by default (see compose.yaml for scale-out).
+#   docker run -p 8000:8000 -e TUMBLESCAN_API_KEYS=<key> -v tumblescan:/data tumblescan
+# It listens on 0.0.0.0 inside the container, so it refuses to start without API keys.
 FROM python:3.11-slim
 
 # libusb-1.0-0: Open3D does not import without it. curl: the health check.
