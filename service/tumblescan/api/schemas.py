@@ -47,6 +47,9 @@ class JobPublic(BaseModel):
 
     @classmethod
     def from_job(cls, job: Job, base_url: str) -> JobPublic:
+        succeeded = job.status == "succeeded" and not job.artifacts_deleted
+        report = f"{base_url}/v1/jobs/{job.id}/report" if succeeded else None
+
         def link(name: str) -> str | None:
             return (
                 f"{base_url}/v1/jobs/{job.id}/{name}" if name in job.artifacts and not job.artifacts_deleted else None
@@ -63,7 +66,7 @@ class JobPublic(BaseModel):
             finished_at=_ts(job.finished_at),
             error=JobError(code=job.error_code, message=job.error_message or "") if job.error_code else None,
             result=job.result,
-            artifacts=JobArtifacts(cloud=link("cloud"), report=link("report")),
+            artifacts=JobArtifacts(cloud=link("cloud"), report=report),
         )
 
 

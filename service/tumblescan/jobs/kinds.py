@@ -38,6 +38,16 @@ class Limits:
     max_cloud_points: int
 
 
+@dataclass(frozen=True)
+class FinishedJob:
+    """A succeeded job's result and files, for building its report."""
+
+    id: str
+    result: dict[str, Any]
+    inputs: dict[str, Path]
+    artifacts: dict[str, Path]
+
+
 @dataclass
 class JobOutput:
     result: dict[str, Any]
@@ -57,6 +67,10 @@ class JobKind(Protocol):
         ...
 
     def run(self, ctx: JobContext) -> JobOutput: ...
+
+    def report(self, job: FinishedJob) -> str:
+        """The job's HTML report (built on first request, then kept with its artifacts)."""
+        ...
 
 
 REGISTRY: dict[str, JobKind] = {}

@@ -16,10 +16,11 @@ from ..estimate import EstimateOptions, estimate_motion
 from ..motion import Motion
 from ..rectify import rectify
 from ..report import ReportInputs, build_report
+from ..result import MotionResult
 from ..tracks import Tracks
 from ..tracks_io import read_tracks, tracks_from_json
 from ..truth import motion_from_json
-from .kinds import JobContext, JobOutput, Limits, register
+from .kinds import FinishedJob, JobContext, JobOutput, Limits, register
 
 TRACKS_FILE = "input-tracks"
 CLOUD_FILE = "input-cloud.ply"
@@ -75,31 +76,26 @@ class LinescanMotion:
         result = estimate_motion(tracks, options, progress=lambda stage, f: ctx.progress(stage, 0.05 + 0.75 * f))
         artifacts: dict[str, str] = {}
         # 3. Rectify the cloud, if one came with the tracks.
-        distorted = rectified = None
         if "cloud" in ctx.inputs:
             ctx.progress("rectifying", 0.85)
-            distorted = read_ply(ctx.inputs["cloud"])
-            xyz = rectify(distorted.xyz_m, distorted.t_s, result.motion(), to_time_s=result.reference_time_s)
-            rectified = TimedCloud(xyz, distorted.t_s, distorted.fields)
-            ctx.progress("writing", 0.9)
-            write_ply(ctx.output_path("cloud.ply"), rectified)
+            cloud = read_ply(ctx.inputs["cloud"])
+            xyz = rectify(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
+            ctx.progress("writing", 0.95)
+            write_ply(ctx.output_path("cloud.ply"), TimedCloud(xyz, cloud.t_s, cloud.fields))
             artifacts["cloud"] = "cloud.ply"
-        # 4. The report (truth beside the estimate when the input was simulated).
-        ctx.progress("reporting", 0.95)
-        truth = load_truth(ctx.inputs["truth"]) if "truth" in ctx.inputs else None
-        page = build_report(
-            ReportInputs(
-                result=result,
-                title=f"Job {ctx.job_id}",
-                tracks=tracks,
-                distorted=distorted,
-                rectified=rectified,
-                truth=truth,
-            )
-        )
-        ctx.output_path("report.html").write_text(page, encoding="utf-8")
-        artifacts["report"] = "report.html"
         return JobOutput(result=result.model_dump(mode="json"), artifacts=artifacts)
+
+    def report(self, job: FinishedJob) -> str:
+        # Truth beside the estimate when the input was simulated.
+        inputs = ReportInputs(
+            result=MotionResult.model_validate(job.result),
+            title=f"Job {job.id}",
+            tracks=read_tracks(job.inputs["tracks"]),
+            distorted=read_ply(job.inputs["cloud"]) if "cloud" in job.inputs else None,
+            rectified=read_ply(job.artifacts["cloud"]) if "cloud" in job.artifacts else None,
+            truth=load_truth(job.inputs["truth"]) if "truth" in job.inputs else None,
+        )
+        return build_report(inputs)
 
 
 def _check_tracks(tracks: Tracks, limits: Limits) -> None:

@@ -5,16 +5,18 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, BinaryIO
 
 from pydantic import ValidationError
 
 from ..errors import InputError
-from .kinds import Limits, get_kind, kind_names
+from .kinds import FinishedJob, Limits, get_kind, kind_names
 from .runtime import Runtime
 from .store import FINAL, Job, new_id
 
 log = logging.getLogger("tumblescan.service")
+REPORT_FILE = "report.html"
 
 
 class QueueUnavailableError(Exception):
@@ -119,6 +121,19 @@ class JobService:
         if job is not None and job.status == "cancelled":
             self._delete_artifacts(job)
         return job
+
+    def report_path(self, job: Job) -> Path:
+        """The succeeded job's report, built and stored on first request."""
+        path = self.artifacts.path(job.id, REPORT_FILE)
+        if not path.exists():
+            finished = FinishedJob(
+                id=job.id,
+                result=job.result or {},
+                inputs={k: self.artifacts.path(job.id, v) for k, v in job.input.items()},
+                artifacts={k: self.artifacts.path(job.id, v) for k, v in job.artifacts.items()},
+            )
+            self.artifacts.save_bytes(job.id, REPORT_FILE, get_kind(job.kind).report(finished).encode("utf-8"))
+        return path
 
     def queue_depth(self) -> int:
         return int(self._pending())

@@ -6,7 +6,6 @@ import asyncio
 import json
 import tempfile
 import time
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -168,17 +167,12 @@ def get_job_cloud(
 )
 def get_job_report(job_id: str, service: ServiceDep, caller: CallerDep) -> FileResponse:
     """The job's report: one self-contained HTML file that works offline."""
-    return FileResponse(report_path(service, _found(service.get(job_id, caller.scope), job_id)), media_type="text/html")
-
-
-def report_path(service: ServiceDep, job: Job) -> Path:
-    if job.status != "succeeded":
+    job = _found(service.get(job_id, caller.scope), job_id)
+    if job.status != "succeeded" or job.artifacts_deleted:
         raise HTTPException(
-            status.HTTP_409_CONFLICT, f"job {job.id} is {job.status}; its report exists once it has succeeded"
+            status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; its report exists once it has succeeded"
         )
-    if "report" not in job.artifacts or job.artifacts_deleted:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job.id} has no report")
-    return service.artifacts.path(job.id, job.artifacts["report"])
+    return FileResponse(service.report_path(job), media_type="text/html")
 
 
 @router.delete("/{job_id}", responses=ERRORS)

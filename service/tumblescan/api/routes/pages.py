@@ -8,7 +8,6 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
-from ...jobs.service import JobService
 from ...jobs.store import FINAL, Job
 from ..deps import KEY_COOKIE, ServiceDep, get_caller
 
@@ -88,8 +87,8 @@ def job_page(job_id: str, request: Request, service: ServiceDep) -> Response:
     if job is None:
         body = f"<h1>Job not found</h1><p>No job <code>{html.escape(job_id)}</code> here. <a href='/'>All jobs</a></p>"
         return page("Job not found", body, status_code=404)
-    if job.status == "succeeded" and "report" in job.artifacts and not job.artifacts_deleted:
-        return _remember_key(request, FileResponse(_artifact(service, job, "report"), media_type="text/html"))
+    if job.status == "succeeded" and not job.artifacts_deleted:
+        return _remember_key(request, FileResponse(service.report_path(job), media_type="text/html"))
     error = (
         f"<p class='failed'>{html.escape(job.error_code or '')}: {html.escape(job.error_message or '')}</p>"
         if job.error_code
@@ -98,7 +97,3 @@ def job_page(job_id: str, request: Request, service: ServiceDep) -> Response:
     body = f"""<h1>Job {job.id}</h1><p>Status: <span class='{job.status}'>{job.status}</span>,
 stage {html.escape(job.stage)}, {100 * job.progress:.0f} %</p>{error}<p><a href='/'>All jobs</a></p>"""
     return _remember_key(request, page(f"Job {job.id}", body, refresh_s=None if job.status in FINAL else 1))
-
-
-def _artifact(service: JobService, job: Job, name: str) -> str:
-    return str(service.artifacts.path(job.id, job.artifacts[name]))
