@@ -21,6 +21,7 @@ from . import errors
 from .deps import key_id
 from .limits import BodyLimit
 from .routes import health, jobs, pages
+from .watcher import JobWatcher
 
 log = logging.getLogger("tumblescan.api")
 
@@ -77,10 +78,13 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
         app.state.admin_hashes = [key_id(k.get_secret_value()) for k in s.admin_keys]
         reaper = Reaper(service, s.reaper_interval_s)
         reaper.start()
+        app.state.watcher = JobWatcher(rt.store)
+        app.state.watcher.start()
         consumer = start_workers(s, embedded_workers) if embedded_workers > 0 else None
         try:
             yield
         finally:
+            await app.state.watcher.stop()
             reaper.stopped.set()
             if consumer is not None:
                 # SIGTERM stops the consumer at once; interrupted jobs are re-queued by its signal handler.

@@ -190,6 +190,12 @@ class JobStore:
         rows = rows[:limit]
         return rows, (encode_cursor(rows[-1]) if more and rows else None)
 
+    def snapshots(self, job_ids: list[str]) -> dict[str, tuple[str, str, float]]:
+        """(status, stage, progress) of each job, in one query."""
+        q = select(jobs.c.id, jobs.c.status, jobs.c.stage, jobs.c.progress).where(jobs.c.id.in_(job_ids))
+        with self.engine.connect() as conn:
+            return {r[0]: (r[1], r[2], float(r[3])) for r in conn.execute(q)}
+
     def ids_with_status(self, status: str) -> list[str]:
         with self.engine.connect() as conn:
             return [r[0] for r in conn.execute(select(jobs.c.id).where(jobs.c.status == status))]

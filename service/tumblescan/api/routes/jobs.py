@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import asyncio
 import json
 import tempfile
-import time
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -21,8 +19,6 @@ from ..deps import CallerDep, ServiceDep
 from ..schemas import ErrorBody, JobCreate, JobList, JobPublic, Status
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
-LONG_POLL_FIRST_S = 0.01
-LONG_POLL_MAX_S = 0.25
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 401, 404, 413, 422, 503, 507)}
 
 
@@ -102,19 +98,11 @@ async def get_job(
 ) -> JobPublic:
     """A job's status, progress, result and artifact links. With ``wait`` the answer comes as
     soon as the job's status, stage or progress changes, or when ``wait`` runs out."""
-    # Store reads go to the thread pool; the waiting happens on the event loop, so many
-    # waiting clients hold no threads.
+    # Waiting happens on the event loop (one shared watcher), so waiting clients hold no threads.
     job = _found(await run_in_threadpool(service.get, job_id, caller.scope), job_id)
-    deadline = time.monotonic() + wait
-    seen = (job.status, job.stage, job.progress)
-    interval = LONG_POLL_FIRST_S
-    while job.status not in FINAL and time.monotonic() < deadline:
-        await asyncio.sleep(interval)
-        # Quick jobs are seen within milliseconds; many waiting clients don't flood the store.
-        interval = min(interval * 1.5, LONG_POLL_MAX_S)
+    if wait > 0 and job.status not in FINAL:
+        await request.app.state.watcher.wait_for_change(job_id, (job.status, job.stage, job.progress), wait)
         job = _found(await run_in_threadpool(service.get, job_id, caller.scope), job_id)
-        if (job.status, job.stage, job.progress) != seen:
-            break
     return public(job, request)
 
 
