@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import multiprocessing
 import sys
 import tempfile
 import time
@@ -35,17 +36,11 @@ async def run_load(url: str, inputs: list[dict[str, Any]], jobs: int, clients: i
     submit_s: list[float] = []
     result_s: list[float] = []
     results: dict[int, dict[str, Any]] = {}
-    health_s: list[float] = []
-    done = asyncio.Event()
-
-    async def prober() -> None:
-        async with httpx.AsyncClient(base_url=url, timeout=10) as http:
-            while not done.is_set():
-                t = time.perf_counter()
-                r = await http.get("/healthz")
-                health_s.append(time.perf_counter() - t)
-                assert r.status_code == 200
-                await asyncio.sleep(0.05)
+    # The health prober runs in its own process so the clients' event loop does not delay it.
+    ctx = multiprocessing.get_context("spawn")
+    stop_probe, health_q = ctx.Event(), ctx.Queue()
+    prober = ctx.Process(target=probe_health, args=(url, stop_probe, health_q))
+    prober.start()
 
     async def one_client(k: int, client: AsyncClient) -> None:
         for i in range(k, jobs, clients):
@@ -57,13 +52,13 @@ async def run_load(url: str, inputs: list[dict[str, Any]], jobs: int, clients: i
             assert finished.status == "succeeded", finished
             results[i] = finished.result or {}
 
-    probe = asyncio.create_task(prober())
     t_start = time.perf_counter()
     async with AsyncClient(url, max_retries=5) as client:
         await asyncio.gather(*(one_client(k, client) for k in range(clients)))
     total = time.perf_counter() - t_start
-    done.set()
-    await probe
+    stop_probe.set()
+    health_s = health_q.get(timeout=60)
+    prober.join(timeout=30)
     return {
         "total": total,
         "submit": np.array(submit_s),
@@ -71,6 +66,18 @@ async def run_load(url: str, inputs: list[dict[str, Any]], jobs: int, clients: i
         "health": np.array(health_s),
         "results": results,
     }
+
+
+def probe_health(url: str, stop: Any, out: Any) -> None:
+    """GET /healthz every 50 ms until stopped; puts the latencies (s) on ``out``."""
+    latencies = []
+    with httpx.Client(base_url=url, timeout=10) as http:
+        while not stop.is_set():
+            t = time.perf_counter()
+            assert http.get("/healthz").status_code == 200
+            latencies.append(time.perf_counter() - t)
+            time.sleep(0.05)
+    out.put(latencies)
 
 
 def check_against_library(inputs: list[dict[str, Any]], results: dict[int, dict[str, Any]]) -> int:
