@@ -16,7 +16,6 @@ import multiprocessing
 import sys
 import tempfile
 import time
-import uuid
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
@@ -111,17 +110,11 @@ def embedded(tmp: Path, stack: ExitStack) -> str:
 
 
 def scaleout(tmp: Path, stack: ExitStack) -> str:
-    from tests.infra import REDIS_URL, ensure_redis, postgres_database
+    from tests.infra import ensure_redis, postgres_database, scaleout_env
     from tests.live import serve, spawn, stop, wait_ready
 
     ensure_redis()
-    db = stack.enter_context(postgres_database())
-    env = {
-        "TUMBLESCAN_REDIS_URL": REDIS_URL,
-        "TUMBLESCAN_DATABASE_URL": db,
-        "TUMBLESCAN_QUEUE_NAME": f"load-{uuid.uuid4().hex[:8]}",
-        "TUMBLESCAN_ARTIFACT_DIR": str(tmp / "shared"),
-    }
+    env = scaleout_env(stack.enter_context(postgres_database()), tmp / "shared")
     workers = [
         spawn(["worker", "--workers", "1"], {**env, "TUMBLESCAN_DATA_DIR": str(tmp / f"w{i}")}, tmp / f"w{i}.log")
         for i in range(2)

@@ -97,3 +97,14 @@ def _wait(check: object, what: str, timeout_s: float = 30) -> None:
             return
         time.sleep(0.3)
     pytest.skip(f"{what} could not be started")
+
+
+def scaleout_env(db_url: str, artifacts: Path, **extra: str) -> dict[str, str]:
+    """Settings shared by an API and its workers in scale-out mode (a queue name of their own)."""
+    return {
+        "TUMBLESCAN_REDIS_URL": REDIS_URL,
+        "TUMBLESCAN_DATABASE_URL": db_url,
+        "TUMBLESCAN_QUEUE_NAME": f"test-{uuid.uuid4().hex[:8]}",
+        "TUMBLESCAN_ARTIFACT_DIR": str(artifacts),
+        **extra,
+    }

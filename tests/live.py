@@ -11,8 +11,11 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import httpx
+
+FINAL = ("succeeded", "failed", "cancelled")
 
 
 def free_port() -> int:
@@ -71,3 +74,16 @@ def serve(
         yield url
     finally:
         stop(proc)
+
+
+def wait_job(
+    http: httpx.Client, job_id: str, *, statuses: tuple[str, ...] = FINAL, timeout_s: float = 120
+) -> dict[str, Any]:
+    """Poll a job until its status is one of ``statuses``; fail the test after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        job: dict[str, Any] = http.get(f"/v1/jobs/{job_id}").json()
+        if job["status"] in statuses:
+            return job
+        assert time.monotonic() < deadline, f"job {job_id} not {statuses} within {timeout_s} s: {job}"
+        time.sleep(0.05)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 from pathlib import Path
 
 import httpx
@@ -14,7 +13,7 @@ from tumblescan import tracks_to_json
 from tumblescan.jobs.store import JobStore
 
 from .conftest import tracks_for
-from .live import serve
+from .live import serve, wait_job
 
 pytestmark = pytest.mark.slow
 FINAL = ("succeeded", "failed", "cancelled")
@@ -29,13 +28,7 @@ def submit(http: httpx.Client, seed: int, options: dict[str, object]) -> str:
 
 
 def wait_status(http: httpx.Client, job_id: str, statuses: tuple[str, ...], timeout_s: float) -> dict[str, object]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        job = http.get(f"/v1/jobs/{job_id}").json()
-        if job["status"] in statuses:
-            return dict(job)
-        time.sleep(0.05)
-    raise AssertionError(f"job {job_id} not {statuses} within {timeout_s} s: {job}")
+    return wait_job(http, job_id, statuses=statuses, timeout_s=timeout_s)
 
 
 def test_queued_and_running_jobs_survive_a_restart(tmp_path: Path) -> None:

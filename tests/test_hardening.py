@@ -6,7 +6,6 @@ import json
 import shutil
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,7 +17,7 @@ import pytest
 from tumblescan import TimedCloud, tracks_to_json, write_ply
 
 from .conftest import tracks_for
-from .live import free_port, serve
+from .live import free_port, serve, wait_job
 
 USER, OTHER, ADMIN = "user-key", "other-key", "admin-key"
 LIMITS = {
@@ -48,11 +47,7 @@ def client(url: str, key: str | None) -> httpx.Client:
 
 
 def wait(http: httpx.Client, job_id: str, timeout_s: float = 60) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while (job := http.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):
-        assert time.monotonic() < deadline, job
-        time.sleep(0.05)
-    return dict(job)
+    return wait_job(http, job_id, timeout_s=timeout_s)
 
 
 def tracks(seed: int = 100) -> dict[str, Any]:

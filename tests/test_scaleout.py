@@ -4,7 +4,6 @@ Redis and an artifact directory finish a batch of jobs."""
 from __future__ import annotations
 
 import time
-import uuid
 from pathlib import Path
 
 import pytest
@@ -14,7 +13,7 @@ from tumblescan.jobs.store import JobStore
 from tumblescan_client import Client
 
 from .conftest import tracks_for
-from .infra import REDIS_URL, ensure_redis, postgres_database
+from .infra import ensure_redis, postgres_database, scaleout_env
 from .live import serve, spawn, stop, wait_ready
 
 pytestmark = pytest.mark.slow
@@ -23,12 +22,7 @@ pytestmark = pytest.mark.slow
 def test_api_and_two_workers_on_redis_and_postgres_finish_a_batch(tmp_path: Path) -> None:
     ensure_redis()
     with postgres_database() as db_url:
-        env = {
-            "TUMBLESCAN_REDIS_URL": REDIS_URL,
-            "TUMBLESCAN_DATABASE_URL": db_url,
-            "TUMBLESCAN_QUEUE_NAME": f"test-{uuid.uuid4().hex[:8]}",
-            "TUMBLESCAN_ARTIFACT_DIR": str(tmp_path / "shared-artifacts"),
-        }
+        env = scaleout_env(db_url, tmp_path / "shared-artifacts")
         workers = [
             spawn(
                 ["worker", "--workers", "1"],

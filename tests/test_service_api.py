@@ -27,7 +27,7 @@ from tumblescan.tracks_io import write_tracks
 from tumblescan.truth import errors_against
 
 from .conftest import tracks_for
-from .live import serve
+from .live import serve, wait_job
 
 FINAL = ("succeeded", "failed", "cancelled")
 
@@ -50,13 +50,7 @@ def http(url: str) -> Iterator[httpx.Client]:
 
 
 def wait(http: httpx.Client, job_id: str, timeout_s: float = 120) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        job = http.get(f"/v1/jobs/{job_id}").json()
-        if job["status"] in FINAL:
-            return job
-        time.sleep(0.05)
-    raise AssertionError(f"job {job_id} did not finish: {job}")
+    return wait_job(http, job_id, timeout_s=timeout_s)
 
 
 def tracks_doc(seed: int) -> dict[str, Any]:

@@ -7,7 +7,6 @@ import shutil
 import subprocess
 import threading
 import time
-import uuid
 from pathlib import Path
 
 import httpx
@@ -16,8 +15,8 @@ import pytest
 from tumblescan import tracks_to_json
 
 from .conftest import tracks_for
-from .infra import REDIS_URL, ensure_redis, pg_up, postgres_database
-from .live import serve, spawn, stop, wait_ready
+from .infra import ensure_redis, pg_up, postgres_database, scaleout_env
+from .live import serve, spawn, stop, wait_job, wait_ready
 
 pytestmark = pytest.mark.slow
 
@@ -35,14 +34,7 @@ def test_submissions_get_503_while_postgres_restarts_and_all_jobs_complete(tmp_p
         pytest.skip("no local PostgreSQL cluster this test may restart")
     ensure_redis()
     with postgres_database() as db_url:
-        env = {
-            "TUMBLESCAN_REDIS_URL": REDIS_URL,
-            "TUMBLESCAN_DATABASE_URL": db_url,
-            "TUMBLESCAN_QUEUE_NAME": f"pg-outage-{uuid.uuid4().hex[:8]}",
-            "TUMBLESCAN_ARTIFACT_DIR": str(tmp_path / "shared"),
-            "TUMBLESCAN_LEASE_S": "5",
-            "TUMBLESCAN_REAPER_INTERVAL_S": "0.5",
-        }
+        env = scaleout_env(db_url, tmp_path / "shared", TUMBLESCAN_LEASE_S="5", TUMBLESCAN_REAPER_INTERVAL_S="0.5")
         worker = spawn(
             ["worker", "--workers", "2"], {**env, "TUMBLESCAN_DATA_DIR": str(tmp_path / "w")}, tmp_path / "w.log"
         )
@@ -80,16 +72,8 @@ def test_submissions_get_503_while_postgres_restarts_and_all_jobs_complete(tmp_p
                 loader.join()
                 assert 503 in statuses and statuses[-1] == 202
                 with httpx.Client(base_url=url, timeout=30) as http:
-                    deadline = time.monotonic() + 240
                     for job_id in accepted:
-                        while (job := http.get(f"/v1/jobs/{job_id}").json())["status"] not in (
-                            "succeeded",
-                            "failed",
-                            "cancelled",
-                        ):
-                            assert time.monotonic() < deadline, job
-                            time.sleep(0.1)
-                        assert job["status"] == "succeeded", job
+                        assert wait_job(http, job_id, timeout_s=240)["status"] == "succeeded"
         finally:
             stop_load.set()
             if not pg_up():
