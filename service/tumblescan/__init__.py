@@ -8,6 +8,7 @@ The numerical core, usable as a library::
 from .cloud_io import TimedCloud, read_ply, write_ply
 from .errors import InputError
 from .estimate import EstimateOptions, estimate_motion
+from .frames import Frames, assemble_frames, read_range_images
 from .motion import Motion
 from .rectify import distort, rectify
 from .result import MotionResult
@@ -23,6 +24,7 @@ __version__ = "0.1.0"
 __all__ = [
     "EstimateOptions",
     "FrameCloud",
+    "Frames",
     "InputError",
     "Motion",
     "MotionResult",
@@ -33,10 +35,12 @@ __all__ = [
     "SwarmConfig",
     "TimedCloud",
     "Tracks",
+    "assemble_frames",
     "distort",
     "estimate_motion",
     "random_motion",
     "read_ply",
+    "read_range_images",
     "read_tracks",
     "rectify",
     "simulate_frames",
