@@ -51,12 +51,6 @@ class InitialGuess:
     passes: int
 
 
-def kabsch(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Rigid ``b ~ R a + t`` by SVD; returns ``R, t``."""
-    R, t = kabsch_batch([a], [b])
-    return R[0], t[0]
-
-
 def kabsch_batch(a: list[FloatArray], b: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
     """Kabsch for many point-set pairs at once (one batched SVD): ``R (P, 3, 3), t (P, 3)``."""
     ca = np.array([p.mean(axis=0) for p in a])

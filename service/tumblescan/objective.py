@@ -119,9 +119,6 @@ class MLProblem:
             J[-1, :k] = complex_step(self._gauge, x, self.free)[:, 0]
         return J
 
-    def initial(self, x: FloatArray) -> FloatArray:
-        return self.pack(x, body_positions(x, self.tracks, self.reference_time_s))
-
     # Variable projection: for fixed motion each P_j is a weighted linear least-squares
     # solution, so LM can run over the motion alone (9 unknowns instead of 9 + 3m).
     # With A_i = W_i R_i and the residual A_i P_j + W_i (c_i - y_i), c_i = (I - R_i) O:

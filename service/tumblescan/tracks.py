@@ -9,7 +9,7 @@ time between frames).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +44,6 @@ class Tracks:
     xyz_m: NDArray[np.float64]
     frame: NDArray[np.int64]
     sensor: SensorNoise | None = None
-    frames_given: bool = field(default=False)
 
     @property
     def n_frames(self) -> int:
@@ -112,7 +111,6 @@ class Tracks:
             xyz_m=xyz[order],
             frame=frames[order],
             sensor=sensor,
-            frames_given=frame is not None,
         )
 
     def select(self, keep: NDArray[np.bool_]) -> Tracks:
@@ -127,7 +125,6 @@ class Tracks:
             xyz_m=self.xyz_m[keep],
             frame=self.frame[keep],
             sensor=self.sensor,
-            frames_given=self.frames_given,
         )
 
     def first_frames(self, count: int) -> Tracks:

@@ -10,17 +10,11 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request, status
 
 from ..jobs.service import JobService
-from ..settings import Settings
 
 
 def get_service(request: Request) -> JobService:
     service: JobService = request.app.state.service
     return service
-
-
-def get_settings_dep(request: Request) -> Settings:
-    settings: Settings = request.app.state.settings
-    return settings
 
 
 def key_id(key: str) -> str:
@@ -75,4 +69,3 @@ def get_caller(request: Request) -> Caller:
 
 ServiceDep = Annotated[JobService, Depends(get_service)]
 CallerDep = Annotated[Caller, Depends(get_caller)]
-SettingsDep = Annotated[Settings, Depends(get_settings_dep)]

@@ -28,10 +28,3 @@ def get_runtime(settings: Settings | None = None) -> Runtime:
         s.data_dir.mkdir(parents=True, exist_ok=True)
         _runtime = (os.getpid(), Runtime(s, JobStore(s.db_url), ArtifactStore(s.artifacts)))
     return _runtime[1]
-
-
-def reset_runtime() -> None:
-    global _runtime
-    if _runtime is not None:
-        _runtime[1].store.dispose()
-    _runtime = None

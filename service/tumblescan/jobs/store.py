@@ -134,9 +134,6 @@ class JobStore:
         with self.engine.connect() as conn:
             conn.execute(select(1))
 
-    def dispose(self) -> None:
-        self.engine.dispose()
-
     # Creation and reads.
 
     def create(
@@ -195,10 +192,6 @@ class JobStore:
         q = select(jobs.c.id, jobs.c.status, jobs.c.stage, jobs.c.progress).where(jobs.c.id.in_(job_ids))
         with self.engine.connect() as conn:
             return {r[0]: (r[1], r[2], float(r[3])) for r in conn.execute(q)}
-
-    def ids_with_status(self, status: str) -> list[str]:
-        with self.engine.connect() as conn:
-            return [r[0] for r in conn.execute(select(jobs.c.id).where(jobs.c.status == status))]
 
     def counts(self) -> dict[str, int]:
         with self.engine.connect() as conn:
