@@ -163,7 +163,9 @@ def test_bad_uploads_are_422(http: httpx.Client, tmp_path: Path) -> None:
     ply = tmp_path / "c.ply"
     write_ply(ply, TimedCloud(np.zeros((3, 3)), np.arange(3.0)))
     r = http.post("/v1/jobs/upload", files={"file": ("c.ply", ply.read_bytes())})
-    assert r.status_code == 422 and "dense frames" in r.json()["detail"]["message"]
+    # Times evenly spread, no frame indices, no period: the frames cannot be told apart.
+    assert r.status_code == 422 and "cannot tell the frames apart" in r.json()["detail"]["message"]
+    assert r.json()["detail"]["field"] == "frame"
     r = http.post("/v1/jobs/upload", files={"file": ("t.json", b'{"observations": []}')}, data={"options": "{nope"})
     assert r.status_code == 422 and r.json()["detail"]["field"] == "options"
     r = http.post(

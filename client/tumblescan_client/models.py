@@ -45,6 +45,9 @@ class Fit(_Model):
     tracks: int
     frames: int
     outliers: int = 0
+    source: Literal["tracks", "frames"] = "tracks"
+    points_used: int | None = None
+    frame_rms_m: list[float | None] | None = None
 
 
 class Validation(_Model):

@@ -3,12 +3,14 @@
 The numerical core, usable as a library::
 
     from tumblescan import Scene, random_motion, simulate_tracks, estimate_motion, rectify
+    from tumblescan import simulate_frames, read_frames, estimate_from_frames
 """
 
 from .cloud_io import TimedCloud, read_ply, write_ply
 from .errors import InputError
 from .estimate import EstimateOptions, estimate_motion
-from .frames import Frames, assemble_frames, read_range_images
+from .estimate_frames import estimate_from_frames
+from .frames import Frames, assemble_frames, read_frames, read_range_images
 from .motion import Motion
 from .rectify import distort, rectify
 from .result import MotionResult
@@ -37,8 +39,10 @@ __all__ = [
     "Tracks",
     "assemble_frames",
     "distort",
+    "estimate_from_frames",
     "estimate_motion",
     "random_motion",
+    "read_frames",
     "read_ply",
     "read_range_images",
     "read_tracks",

@@ -18,6 +18,8 @@ import typer
 from .cloud_io import TimedCloud, read_ply, write_ply
 from .errors import InputError
 from .estimate import EstimateOptions, estimate_motion
+from .estimate_frames import estimate_from_frames
+from .frames import read_frames
 from .rectify import rectify as rectify_points
 from .result import MotionResult
 from .sensor import Scanner, SensorNoise
@@ -102,7 +104,7 @@ ModelChoice = Literal["auto", "spin-precession", "spin-only"]
 @app.command()
 @input_errors
 def estimate(
-    tracks_file: Annotated[Path, typer.Argument(help="tracks as JSON or CSV")],
+    tracks_file: Annotated[Path, typer.Argument(help="tracks (JSON, CSV) or dense frames (PLY, NPZ)")],
     strategy: Annotated[Strategy, typer.Option()] = "auto",
     objective: Annotated[Objective, typer.Option()] = "ml",
     model: Annotated[ModelChoice, typer.Option()] = "auto",
@@ -118,8 +120,20 @@ def estimate(
     truth: Annotated[
         Path | None, typer.Option(help="with --report: truth.json of a simulation, shown beside the estimate")
     ] = None,
+    rectified: Annotated[
+        Path | None, typer.Option(help="frames input: write the rectified cloud here (default: <input>-rectified.ply)")
+    ] = None,
+    frame_period_s: Annotated[
+        float | None, typer.Option(min=0.0, help="frames input without frame indices: the scanner's frame period")
+    ] = None,
 ) -> None:
-    """Estimate the motion from feature tracks and print it."""
+    """Estimate the motion from feature tracks or dense frames and print it; frames are also
+    rectified to the reference time."""
+    if _is_cloud(tracks_file):
+        estimate_frames_cli(
+            tracks_file, model, reference_time_s, seed, frame_period_s, as_json, report, rectified, truth
+        )
+        return
     tracks = read_tracks(tracks_file)
     sensor = None
     if range_sigma_m is not None or angle_sigma_arcsec is not None:
@@ -134,6 +148,54 @@ def estimate(
     result = estimate_motion(tracks, options)
     if report is not None:
         write_report(report, result, tracks, cloud, truth)
+    if as_json:
+        sys.stdout.write(result.model_dump_json() + "\n")
+    else:
+        typer.echo(format_result(result))
+
+
+def _is_cloud(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(3) in (b"ply", b"PK\x03")
+    except OSError:
+        return False
+
+
+def estimate_frames_cli(
+    path: Path,
+    model: ModelChoice,
+    reference_time_s: float | None,
+    seed: int,
+    frame_period_s: float | None,
+    as_json: bool,
+    report: Path | None,
+    rectified: Path | None,
+    truth: Path | None,
+) -> None:
+    """``estimate`` on dense frames: motion, rectified cloud, optional report."""
+    frames = read_frames(path, frame_period_s=frame_period_s)
+    options = EstimateOptions(model=model, reference_time_s=reference_time_s, seed=seed, frame_period_s=frame_period_s)
+    result = estimate_from_frames(frames, options)
+    cloud = frames.cloud
+    xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
+    out = rectified or path.with_name(path.stem + "-rectified.ply")
+    rectified_cloud = TimedCloud(xyz, cloud.t_s, cloud.fields)
+    write_ply(out, rectified_cloud)
+    typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={result.reference_time_s} s", err=True)
+    if report is not None:
+        from .jobs.linescan import load_truth
+        from .report import ReportInputs, build_report
+
+        inputs = ReportInputs(
+            result=result,
+            title=f"Motion estimate: {path.stem}",
+            distorted=cloud,
+            rectified=rectified_cloud,
+            truth=load_truth(truth) if truth is not None else None,
+        )
+        report.write_text(build_report(inputs), encoding="utf-8")
+        typer.echo(f"wrote {report}", err=True)
     if as_json:
         sys.stdout.write(result.model_dump_json() + "\n")
     else:
@@ -207,8 +269,7 @@ def format_result(r: MotionResult) -> str:
         ]
     lines += [
         f"centre           {_vec(r.precession.center_m)} m  +- {_vec(u.center_m, 3)}",
-        f"fit              rms {r.fit.rms_residual_m:.3g} m over {r.fit.observations} observations, "
-        f"{r.fit.tracks} tracks, {r.fit.frames} frames, {r.fit.outliers} outliers",
+        _fit_line(r),
         f"validation       {'passed' if r.validation.passed else 'FAILED'} "
         f"({r.validation.test}, frames {r.validation.frames})",
         f"solver           {r.solver.path}, {r.solver.iterations} evaluations, {r.solver.attempts} attempt(s), "
@@ -216,6 +277,21 @@ def format_result(r: MotionResult) -> str:
     ]
     lines += [f"warning          {w}" for w in r.warnings]
     return "\n".join(lines)
+
+
+def _fit_line(r: MotionResult) -> str:
+    f = r.fit
+    if f.source == "frames":
+        worst = max(((v, i) for i, v in enumerate(f.frame_rms_m or []) if v is not None), default=None)
+        tail = f", worst frame {worst[1]} ({worst[0]:.3g} m)" if worst else ""
+        return (
+            f"fit              rms {f.rms_residual_m:.3g} m point-to-plane over {f.points_used} sampled of "
+            f"{f.observations} points, {f.frames} frames{tail}"
+        )
+    return (
+        f"fit              rms {f.rms_residual_m:.3g} m over {f.observations} observations, "
+        f"{f.tracks} tracks, {f.frames} frames, {f.outliers} outliers"
+    )
 
 
 def _vec(v: Any, digits: int = 6) -> str:

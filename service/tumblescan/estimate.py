@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy import stats
 from threadpoolctl import threadpool_limits
 
+from .dense import DenseConfig
 from .errors import InvalidOptionError
 from .fit import Fit, Objective, fit_model
 from .initializer import InitializerError, cone_initial
@@ -57,6 +58,10 @@ class EstimateOptions(BaseModel):
     validation_frames: int | None = Field(None, ge=MIN_FRAMES, description="frames in the second solve")
     significance: float = Field(1e-3, gt=0, lt=0.5, description="level of the model and similarity tests")
     reject_outliers: bool = True
+    frame_period_s: float | None = Field(
+        None, gt=0, allow_inf_nan=False, description="frames input without frame indices: the scanner's frame period"
+    )
+    dense: DenseConfig = Field(DenseConfig(), description="frames input: sampling and iterations of the dense fit")
 
 
 @dataclass
@@ -118,7 +123,7 @@ def _estimate(tracks: Tracks, opts: EstimateOptions, progress: Progress) -> Moti
     started = time.perf_counter()
     T = float(tracks.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
     noise = opts.sensor or tracks.sensor or SensorNoise()
-    n2 = _validation_frames(tracks.n_frames, opts.validation_frames)
+    n2 = validation_frame_count(tracks.n_frames, opts.validation_frames)
     run = _Run(T, noise, n2, opts, np.random.default_rng(opts.seed), progress)
     best: _Solution | None = None
     attempts = 0
@@ -141,7 +146,7 @@ def _estimate(tracks: Tracks, opts: EstimateOptions, progress: Progress) -> Moti
     return _result(tracks, best, T, attempts, time.perf_counter() - started)
 
 
-def _validation_frames(n_frames: int, requested: int | None) -> int:
+def validation_frame_count(n_frames: int, requested: int | None) -> int:
     if requested is not None:
         if requested >= n_frames:
             raise InvalidOptionError(
@@ -235,40 +240,17 @@ def _prefer_spin_only(full: Fit, spin: Fit, alpha: float, warnings: list[str]) -
 
 def _result(tracks: Tracks, sol: _Solution, T: float, attempts: int, elapsed_s: float) -> MotionResult:
     fit = sol.fit
-    x, cov = fit.x, fit.scaled_cov()
-    deg = np.degrees
-    l_s = axis_from_angles(x[0], x[1])
-    spin_only = fit.spin_only
+    x = fit.x
     center = x[6:9]
-    if spin_only:
+    if fit.spin_only:
         # The centre reported is the point of the spin axis nearest the features' centroid.
-        c = fit.body_m.mean(axis=0)
-        center = center + l_s * float(l_s @ (c - center))
-    l_p = None if spin_only else axis_from_angles(x[3], x[4])
+        center = nearest_on_spin_axis(x, fit.body_m.mean(axis=0))
     warnings = list(sol.warnings)
     if fit.outliers:
         warnings.append(f"{fit.outliers} observation(s) rejected as outliers (counted in fit.observations)")
-    check = sol.check
     return MotionResult.model_validate(
         {
-            "model": "spin-only" if spin_only else "spin-precession",
-            "reference_time_s": T,
-            "spin": {"axis": l_s.tolist(), "alpha_deg": deg(x[0]), "beta_deg": deg(x[1]), "rate_deg_s": deg(x[2])},
-            "precession": {
-                "axis": None if l_p is None else l_p.tolist(),
-                "alpha_deg": None if spin_only else deg(x[3]),
-                "beta_deg": None if spin_only else deg(x[4]),
-                "rate_deg_s": 0.0 if spin_only else deg(x[5]),
-                "center_m": center.tolist(),
-            },
-            "nutation_angle_deg": None if l_p is None else deg(np.arccos(np.clip(l_s @ l_p, -1, 1))),
-            "uncertainty": {
-                "spin_axis_deg": deg(axis_sigma_rad(x, cov, 0, 1)),
-                "spin_rate_deg_s": deg(np.sqrt(cov[2, 2])),
-                "precession_axis_deg": None if spin_only else deg(axis_sigma_rad(x, cov, 3, 4)),
-                "precession_rate_deg_s": deg(np.sqrt(cov[5, 5])),
-                "center_m": np.sqrt(np.diag(cov)[6:9]).tolist(),
-            },
+            **motion_fields(x, fit.scaled_cov(), spin_only=fit.spin_only, center_m=center, reference_time_s=T),
             "fit": {
                 "rms_residual_m": fit.rms_m,
                 "observations": len(tracks),
@@ -276,14 +258,53 @@ def _result(tracks: Tracks, sol: _Solution, T: float, attempts: int, elapsed_s: 
                 "frames": tracks.n_frames,
                 "outliers": fit.outliers,
             },
-            "validation": {
-                "passed": bool(check is not None and check.passed),
-                "frames": (tracks.n_frames, sol.n2),
-                "distance": None if check is None or not np.isfinite(check.distance) else check.distance,
-                "threshold": None if check is None or not np.isfinite(check.threshold) else check.threshold,
-                "test": "skipped" if check is None else check.test,
-            },
+            "validation": validation_fields(sol.check, tracks.n_frames, sol.n2),
             "solver": {"path": sol.path, "iterations": fit.iterations, "attempts": attempts, "elapsed_s": elapsed_s},
             "warnings": warnings,
         }
     )
+
+
+def nearest_on_spin_axis(x: FloatArray, point_m: FloatArray) -> FloatArray:
+    """The point of the spin axis (through ``x``'s centre) nearest ``point_m``."""
+    l_s = axis_from_angles(x[0], x[1])
+    return np.asarray(x[6:9] + l_s * float(l_s @ (point_m - x[6:9])), dtype=float)
+
+
+def motion_fields(
+    x: FloatArray, cov: FloatArray, *, spin_only: bool, center_m: FloatArray, reference_time_s: float
+) -> dict[str, Any]:
+    """The motion part of a :class:`MotionResult` from a canonical 9-vector and its covariance."""
+    deg = np.degrees
+    l_s = axis_from_angles(x[0], x[1])
+    l_p = None if spin_only else axis_from_angles(x[3], x[4])
+    return {
+        "model": "spin-only" if spin_only else "spin-precession",
+        "reference_time_s": reference_time_s,
+        "spin": {"axis": l_s.tolist(), "alpha_deg": deg(x[0]), "beta_deg": deg(x[1]), "rate_deg_s": deg(x[2])},
+        "precession": {
+            "axis": None if l_p is None else l_p.tolist(),
+            "alpha_deg": None if spin_only else deg(x[3]),
+            "beta_deg": None if spin_only else deg(x[4]),
+            "rate_deg_s": 0.0 if spin_only else deg(x[5]),
+            "center_m": np.asarray(center_m).tolist(),
+        },
+        "nutation_angle_deg": None if l_p is None else deg(np.arccos(np.clip(l_s @ l_p, -1, 1))),
+        "uncertainty": {
+            "spin_axis_deg": deg(axis_sigma_rad(x, cov, 0, 1)),
+            "spin_rate_deg_s": deg(np.sqrt(cov[2, 2])),
+            "precession_axis_deg": None if spin_only else deg(axis_sigma_rad(x, cov, 3, 4)),
+            "precession_rate_deg_s": deg(np.sqrt(cov[5, 5])),
+            "center_m": np.sqrt(np.diag(cov)[6:9]).tolist(),
+        },
+    }
+
+
+def validation_fields(check: Similarity | None, n_frames: int, n2: int) -> dict[str, Any]:
+    return {
+        "passed": bool(check is not None and check.passed),
+        "frames": (n_frames, n2),
+        "distance": None if check is None or not np.isfinite(check.distance) else check.distance,
+        "threshold": None if check is None or not np.isfinite(check.threshold) else check.threshold,
+        "test": "skipped" if check is None else check.test,
+    }

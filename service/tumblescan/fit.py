@@ -22,7 +22,7 @@ from .motion import canonical_params, predict
 from .objective import ALL_FREE, SPIN_ONLY_FREE, MLProblem, PairwiseProblem, body_positions
 from .sensor import SensorNoise
 from .tracks import Tracks
-from .uncertainty import covariance, embed
+from .uncertainty import canonical_cov, covariance, embed
 
 FloatArray = NDArray[np.float64]
 Objective = Literal["ml", "pairwise"]
@@ -170,7 +170,7 @@ def _finish(problem: MLProblem, z: FloatArray, free: tuple[int, ...], keep: NDAr
         x=canonical_params(x),
         body_m=body,
         free=free,
-        cov=_canonical_cov(x, cov9),
+        cov=canonical_cov(x, cov9),
         chi2=chi2,
         dof=dof,
         noise_scale=float(np.sqrt(chi2 / dof)),
@@ -183,12 +183,3 @@ def _finish(problem: MLProblem, z: FloatArray, free: tuple[int, ...], keep: NDAr
 def _position_residuals(problem: MLProblem, z: FloatArray) -> FloatArray:
     x, body = problem.unpack(z)
     return np.asarray(predict(x, body[problem.tracks.track], problem.tau) - problem.tracks.xyz_m)
-
-
-def _canonical_cov(x: FloatArray, cov9: FloatArray) -> FloatArray:
-    """Covariance after :func:`canonical_params`, whose Jacobian is diagonal with entries
-    +-1 (axis flips negate ``b`` and ``w``); the signs are read off a tiny step."""
-    h = 1e-6
-    step = canonical_params(x + h) - canonical_params(x)
-    sign = np.sign(np.mod(step + np.pi, 2 * np.pi) - np.pi)
-    return np.asarray(cov9 * np.outer(sign, sign), dtype=float)

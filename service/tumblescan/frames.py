@@ -6,6 +6,7 @@ estimate needs at least ``MIN_FRAMES`` frames. Frames come from a per-point ``fr
 when present, otherwise from the scanner's frame period, otherwise from the idle gaps between
 frames in the times; lines come from a ``line`` field or from the distinct times in a frame.
 
+Point NPZ: ``xyz_m`` (n, 3), ``t_s`` (n,), optional integer ``frame`` and ``line``.
 Range-image NPZ: ``range_m`` (frames, lines, pixels; 0 where the ray had no return),
 ``t_s`` (frames, lines), ``azimuth_deg`` (lines,) or (frames, lines), ``elevation_deg``
 (pixels,). The archive is inspected before anything is decompressed: only these names, no
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .cloud_io import TimedCloud
+from .cloud_io import TimedCloud, check_line_times, read_ply
 from .errors import LimitExceededError, MalformedInputError, NonFiniteValueError, TimeOrderError, TooFewFramesError
 from .sensor import directions
 from .tracks import MIN_FRAMES
@@ -30,6 +31,7 @@ from .tracks import MIN_FRAMES
 # Consecutive distinct times further apart than this many typical line intervals start a new frame.
 FRAME_GAP_FACTOR = 10.0
 NPZ_KEYS = ("range_m", "t_s", "azimuth_deg", "elevation_deg")
+POINT_KEYS = ("xyz_m", "t_s")
 
 
 @dataclass(frozen=True)
@@ -120,10 +122,49 @@ def _lines(cloud: TimedCloud, frame: NDArray[np.int64]) -> NDArray[np.int64]:
     return line
 
 
+def read_frames(
+    path: str | os.PathLike[str], *, frame_period_s: float | None = None, max_bytes: int = 2 << 30
+) -> Frames:
+    """Frames from a PLY with per-point times, an NPZ of points (``xyz_m`` ``(n, 3)``, ``t_s``,
+    optional integer ``frame`` and ``line``) or an NPZ of range images (module docstring)."""
+    p = Path(path)
+    with open(p, "rb") as fh:
+        head = fh.read(4)
+    if head.startswith(b"ply"):
+        return assemble_frames(read_ply(p), frame_period_s=frame_period_s)
+    if not head.startswith(b"PK"):
+        raise MalformedInputError("a frames file must be a PLY or an NPZ", field="file")
+    names = _npz_names(p)
+    cloud = read_range_images(p, max_bytes=max_bytes) if "range_m" in names else _read_point_npz(p, max_bytes)
+    return assemble_frames(cloud, frame_period_s=frame_period_s)
+
+
+def _read_point_npz(path: Path, max_bytes: int) -> TimedCloud:
+    arrays = _load_npz(path, max_bytes, required=POINT_KEYS, optional=("frame", "line"))
+    xyz, t = arrays["xyz_m"], arrays["t_s"]
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise MalformedInputError(f"xyz_m must be (n, 3); got shape {xyz.shape}", field="xyz_m")
+    if t.shape != (len(xyz),):
+        raise MalformedInputError(f"t_s must be ({len(xyz)},), one time per point; got {t.shape}", field="t_s")
+    for name, a in (("xyz_m", xyz), ("t_s", t)):
+        if not np.isfinite(a).all():
+            raise NonFiniteValueError(f"{name} holds NaN or infinity", field=name)
+    fields: dict[str, np.ndarray] = {}
+    for name in ("frame", "line"):
+        if name in arrays:
+            a = arrays[name]
+            if a.shape != (len(xyz),) or not np.all(a == np.round(a)) or (a < 0).any():
+                raise MalformedInputError(f"{name} must hold one non-negative integer per point", field=name)
+            fields[name] = a.astype(np.int32)
+    cloud = TimedCloud(xyz_m=xyz, t_s=t, fields=fields)
+    check_line_times(cloud)
+    return cloud
+
+
 def read_range_images(path: str | os.PathLike[str], *, max_bytes: int = 2 << 30) -> TimedCloud:
     """Points (with ``frame``, ``line`` and ``pixel``) from a range-image NPZ (module docstring)."""
     p = Path(path)
-    arrays = _load_npz(p, max_bytes)
+    arrays = _load_npz(p, max_bytes, required=NPZ_KEYS, optional=())
     rng_m, t, az, el = (arrays[k] for k in NPZ_KEYS)
     if rng_m.ndim != 3:
         raise MalformedInputError(f"range_m must be (frames, lines, pixels); got shape {rng_m.shape}", field="range_m")
@@ -153,17 +194,27 @@ def read_range_images(path: str | os.PathLike[str], *, max_bytes: int = 2 << 30)
     return TimedCloud(xyz_m=np.asarray(xyz, dtype=float), t_s=t[f_i, k_i].astype(float), fields=fields)
 
 
-def _load_npz(path: Path, max_bytes: int) -> dict[str, NDArray[np.float64]]:
+def _npz_members(path: Path) -> list[zipfile.ZipInfo]:
     try:
         with zipfile.ZipFile(path) as z:
-            members = z.infolist()
+            return z.infolist()
     except (zipfile.BadZipFile, OSError) as exc:
         raise MalformedInputError(f"not an NPZ (zip) archive: {exc}", field="file") from None
+
+
+def _npz_names(path: Path) -> set[str]:
+    return {m.filename.removesuffix(".npy") for m in _npz_members(path)}
+
+
+def _load_npz(
+    path: Path, max_bytes: int, *, required: tuple[str, ...], optional: tuple[str, ...]
+) -> dict[str, NDArray[np.float64]]:
+    members = _npz_members(path)
     names = {m.filename.removesuffix(".npy") for m in members}
-    unknown = sorted(names - set(NPZ_KEYS))
+    unknown = sorted(names - set(required) - set(optional))
     if unknown:
         raise MalformedInputError(f"unexpected array(s) in the NPZ: {', '.join(unknown)}", field=unknown[0])
-    missing = [k for k in NPZ_KEYS if k not in names]
+    missing = [k for k in required if k not in names]
     if missing:
         raise MalformedInputError(f"the NPZ lacks {', '.join(missing)}", field=missing[0])
     declared = sum(m.file_size for m in members)
@@ -171,6 +222,6 @@ def _load_npz(path: Path, max_bytes: int) -> dict[str, NDArray[np.float64]]:
         raise LimitExceededError(f"the NPZ would expand to {declared} bytes; the limit is {max_bytes}", field="file")
     try:
         with np.load(path, allow_pickle=False) as npz:
-            return {k: np.asarray(npz[k], dtype=float) for k in NPZ_KEYS}
+            return {k: np.asarray(npz[k], dtype=float) for k in (*required, *optional) if k in names}
     except (ValueError, OSError, zipfile.BadZipFile) as exc:
         raise MalformedInputError(f"the NPZ could not be read: {exc}", field="file") from None

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .motion import angles_from_axis, rotate, rotation_matrix, transport
+from .motion import angles_from_axis, rotate, rotation_matrices, rotation_matrix, transport
 from .tracks import Tracks
 
 FloatArray = NDArray[np.float64]
@@ -35,6 +35,8 @@ RETIME_TOL = 1e-4
 # Below this spread of the rotation-axis tips (radians) the cone has collapsed: no
 # precession is visible and the spin-only start is used.
 MIN_CONE_SPREAD_RAD = 1e-6
+# Scale of the robust loss polishing the cone on measured transforms (radians).
+POLISH_SCALE_RAD = np.radians(0.5)
 
 
 class InitializerError(RuntimeError):
@@ -122,12 +124,24 @@ def _one_pass(
         raise InitializerError(f"only {len(pairs)} frame pair(s) share 3 or more features; the cone needs 3")
     Rs, ts = kabsch_batch([a for _, a, _ in pairs], [b for _, _, b in pairs])
     ks = np.array([k for k, _, _ in pairs])
-    t_k = t_frame[ks]
-    dt = t_frame[ks + 1] - t_k
+    return cone_from_transforms(Rs, ts, t_frame[ks], t_frame[ks + 1], reference_time_s, passes=passes)
+
+
+def cone_from_transforms(
+    Rs: FloatArray, ts: FloatArray, t_from_s: FloatArray, t_to_s: FloatArray, reference_time_s: float, passes: int = 1
+) -> InitialGuess:
+    """Steps 2-4 of the module docstring from rigid transforms ``p(t_to) = R_k p(t_from) + t_k``.
+
+    Rs: ``(P, 3, 3)``; ts: ``(P, 3)`` metres; t_from_s, t_to_s: ``(P,)`` seconds, in time order.
+    """
+    if len(Rs) < 3:
+        raise InitializerError(f"{len(Rs)} inter-frame transform(s); the cone needs 3")
+    t_k = np.asarray(t_from_s, dtype=float)
+    dt = np.asarray(t_to_s, dtype=float) - t_k
     axes_angles = [axis_angle(R) for R in Rs]
     axes = np.array([aa[0] for aa in axes_angles])
     angles = np.array([aa[1] for aa in axes_angles])
-    center = _center(Rs, ts)
+    center = center_from_transforms(Rs, ts)
     x_spin = _spin_only(axes, angles, dt, center)
 
     # 2. Precession axis: normal of the plane through the tips of the rotation axes.
@@ -159,7 +173,7 @@ def _one_pass(
     return InitialGuess(x=x, x_spin_only=x_spin, cone_collapsed=False, passes=passes)
 
 
-def _center(Rs: FloatArray, ts: FloatArray) -> FloatArray:
+def center_from_transforms(Rs: FloatArray, ts: FloatArray) -> FloatArray:
     """``O_p`` from ``t_k = (I - R_k) O_p`` (minimum-norm when the axes are all parallel)."""
     A = (np.eye(3) - Rs).reshape(-1, 3)
     return np.asarray(np.linalg.lstsq(A, ts.reshape(-1), rcond=None)[0], dtype=float)
@@ -177,3 +191,37 @@ def _with_small_precession(x_spin: FloatArray) -> FloatArray:
     x[3], x[4] = x[0] + np.pi / 2, np.pi / 2
     x[5] = 1e-3
     return x
+
+
+def motion_from_transforms(
+    Rs: FloatArray, ts: FloatArray, t_from_s: FloatArray, t_to_s: FloatArray, reference_time_s: float
+) -> InitialGuess:
+    """The cone start (:func:`cone_from_transforms`) polished by a robust least-squares fit of
+    the six rotational parameters to the transforms.
+
+    The closed-form cone is exact for exact transforms, but its precession axis (the normal of
+    the plane through the rotation-axis tips) degrades quickly when the transforms carry
+    errors of a fraction of a degree, as registrations of dense frames do. The polish minimizes
+    ``sum_k rho(|log(R_k(x)^T R_k)|)`` (soft-L1 at ``POLISH_SCALE_RAD``) from the cone and
+    from the spin-only start, and keeps the better.
+    """
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    cone = cone_from_transforms(Rs, ts, t_from_s, t_to_s, reference_time_s)
+    tau_from = np.asarray(t_from_s, dtype=float) - reference_time_s
+    tau_to = np.asarray(t_to_s, dtype=float) - reference_time_s
+
+    def residuals(rot: FloatArray) -> FloatArray:
+        x = np.concatenate([rot, cone.x[6:9]])
+        predicted = rotation_matrices(x, tau_to) @ np.swapaxes(rotation_matrices(x, tau_from), 1, 2)
+        return np.asarray(Rotation.from_matrix(np.swapaxes(predicted, 1, 2) @ Rs).as_rotvec().ravel())
+
+    best = None
+    for start in (cone.x[:6], _with_small_precession(cone.x_spin_only)[:6]):
+        sol = least_squares(residuals, start, loss="soft_l1", f_scale=POLISH_SCALE_RAD)
+        if best is None or sol.cost < best.cost:
+            best = sol
+    assert best is not None
+    x = np.concatenate([best.x, cone.x[6:9]])
+    return InitialGuess(x=x, x_spin_only=cone.x_spin_only, cone_collapsed=cone.cone_collapsed, passes=cone.passes)

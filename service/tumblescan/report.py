@@ -62,7 +62,11 @@ def build_report(inputs: ReportInputs) -> str:
         _figure_3d(inputs),
     ]
     if inputs.tracks is not None:
-        parts += ["<h2>Residuals per frame</h2>", _figure_residuals(r, inputs.tracks)]
+        frames, rms = frame_residuals(r, inputs.tracks)
+        parts += ["<h2>Residuals per frame</h2>", _figure_residuals(frames, rms)]
+    elif r.fit.frame_rms_m is not None:
+        rms = np.array([np.nan if v is None else v for v in r.fit.frame_rms_m])
+        parts += ["<h2>Point-to-plane residuals per frame</h2>", _figure_residuals(np.arange(len(rms)), rms)]
     body = "\n".join(parts)
     script = plotly.offline.get_plotlyjs()
     return f"""<!DOCTYPE html>
@@ -287,10 +291,9 @@ def _cone(center: NDArray[np.float64], axis: NDArray[np.float64], half_angle: fl
     )
 
 
-def _figure_residuals(r: MotionResult, tracks: Tracks) -> str:
+def _figure_residuals(frames: NDArray[np.int64], rms: NDArray[np.float64]) -> str:
     import plotly.graph_objects as go
 
-    frames, rms = frame_residuals(r, tracks)
     fig = go.Figure(go.Bar(x=frames, y=rms * 1000, name="RMS residual"))
     fig.update_layout(
         height=300, margin={"l": 50, "r": 10, "t": 10, "b": 40}, xaxis_title="frame", yaxis_title="RMS residual (mm)"

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from .motion import N_PARAMS, axis_from_angles
+from .motion import N_PARAMS, axis_from_angles, canonical_params
 from .objective import complex_step
 
 FloatArray = NDArray[np.float64]
@@ -102,3 +102,12 @@ def similarity(
     d = float(np.max(np.abs(dg) / np.sqrt(np.maximum(var, 1e-300))))
     threshold = float(stats.norm.isf(alpha / (2 * len(dg))))
     return Similarity(d < threshold, d, threshold, "covariance")
+
+
+def canonical_cov(x: FloatArray, cov9: FloatArray) -> FloatArray:
+    """Covariance after :func:`canonical_params`, whose Jacobian is diagonal with entries
+    +-1 (axis flips negate ``b`` and ``w``); the signs are read off a tiny step."""
+    h = 1e-6
+    step = canonical_params(x + h) - canonical_params(x)
+    sign = np.sign(np.mod(step + np.pi, 2 * np.pi) - np.pi)
+    return np.asarray(cov9 * np.outer(sign, sign), dtype=float)

@@ -44,6 +44,7 @@ class FinishedJob:
 
     id: str
     result: dict[str, Any]
+    options: dict[str, Any]
     inputs: dict[str, Path]
     artifacts: dict[str, Path]
 
@@ -62,8 +63,9 @@ class JobKind(Protocol):
         """Validate a JSON ``input``; store what the job needs; return input name -> file name."""
         ...
 
-    def accept_files(self, files: dict[str, Path], limits: Limits) -> dict[str, str]:
-        """Validate uploaded files (already stored); return input name -> file name."""
+    def accept_files(self, files: dict[str, Path], limits: Limits, options: dict[str, Any]) -> dict[str, str]:
+        """Validate uploaded files (already stored) with the job's validated options; return
+        input name -> file name."""
         ...
 
     def run(self, ctx: JobContext) -> JobOutput: ...

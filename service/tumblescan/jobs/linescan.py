@@ -1,5 +1,5 @@
-"""The ``linescan-motion`` job kind: motion from feature tracks, plus an optional cloud with
-per-point times rectified to the motion's reference time."""
+"""The ``linescan-motion`` job kind: motion from feature tracks (plus an optional cloud with
+per-point times, rectified), or from dense frames alone (PLY or NPZ), rectified in full."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from pydantic import BaseModel
 from ..cloud_io import TimedCloud, read_ply, write_ply
 from ..errors import InputError, LimitExceededError, MalformedInputError
 from ..estimate import EstimateOptions, estimate_motion
+from ..estimate_frames import estimate_from_frames
+from ..frames import read_frames
 from ..motion import Motion
 from ..rectify import rectify
 from ..report import ReportInputs, build_report
@@ -38,64 +40,105 @@ class LinescanMotion:
         save(TRACKS_FILE + ".json", json.dumps(payload["tracks"]).encode())
         return {"tracks": TRACKS_FILE + ".json"}
 
-    def accept_files(self, files: dict[str, Path], limits: Limits) -> dict[str, str]:
+    def accept_files(self, files: dict[str, Path], limits: Limits, options: dict[str, Any]) -> dict[str, str]:
         unknown = sorted(set(files) - {"file", "cloud", "truth"})
         if unknown:
             raise MalformedInputError(f"unknown upload field(s): {', '.join(unknown)}", field=unknown[0])
         if "file" not in files:
-            raise MalformedInputError("an upload needs 'file' (tracks JSON or CSV)", field="file")
-        kind = sniff(files["file"])
-        if kind in ("ply", "npz"):
             raise MalformedInputError(
-                f"'file' is a {kind.upper()} of dense frames: estimating motion from frames without feature tracks "
-                "is not available yet; upload tracks (JSON or CSV) as 'file' and the cloud as 'cloud' to rectify it",
-                field="file",
+                "an upload needs 'file' (tracks as JSON or CSV, or frames as PLY or NPZ)", field="file"
             )
-        _check_tracks(read_tracks(files["file"]), limits)
-        accepted = {"tracks": files["file"].name}
-        if "cloud" in files:
-            if sniff(files["cloud"]) != "ply":
-                raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
-            points = len(read_ply(files["cloud"]))
-            if points > limits.max_cloud_points:
-                raise LimitExceededError(
-                    f"cloud has {points} points; the limit is {limits.max_cloud_points}", field="cloud"
-                )
-            accepted["cloud"] = files["cloud"].name
+        accepted = (
+            self._accept_frames(files, limits, options)
+            if sniff(files["file"]) in ("ply", "npz")
+            else self._accept_tracks(files, limits)
+        )
         if "truth" in files:
             load_truth(files["truth"])
             accepted["truth"] = files["truth"].name
         return accepted
 
+    def _accept_tracks(self, files: dict[str, Path], limits: Limits) -> dict[str, str]:
+        _check_tracks(read_tracks(files["file"]), limits)
+        accepted = {"tracks": files["file"].name}
+        if "cloud" in files:
+            if sniff(files["cloud"]) != "ply":
+                raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
+            _check_points(len(read_ply(files["cloud"])), limits, "cloud")
+            accepted["cloud"] = files["cloud"].name
+        return accepted
+
+    def _accept_frames(self, files: dict[str, Path], limits: Limits, options: dict[str, Any]) -> dict[str, str]:
+        if "cloud" in files:
+            raise MalformedInputError(
+                "'cloud' goes with tracks; a frames file is itself the cloud that is rectified", field="cloud"
+            )
+        period = EstimateOptions.model_validate(options).frame_period_s
+        # Assembled in full now, so a cloud that cannot be split into frames is refused at once.
+        frames = read_frames(files["file"], frame_period_s=period, max_bytes=limits.max_cloud_points * 64)
+        _check_points(len(frames.cloud), limits, "file")
+        return {"frames": files["file"].name}
+
     def run(self, ctx: JobContext) -> JobOutput:
+        options = EstimateOptions.model_validate(ctx.options)
+        if "frames" in ctx.inputs:
+            return self._run_frames(ctx, options)
         # 1. Read and validate the tracks.
         ctx.progress("loading", 0.02)
         tracks = read_tracks(ctx.inputs["tracks"])
-        options = EstimateOptions.model_validate(ctx.options)
         # 2. Estimate, reporting through the attempts (each report is a cancellation point).
         result = estimate_motion(tracks, options, progress=lambda stage, f: ctx.progress(stage, 0.05 + 0.75 * f))
         artifacts: dict[str, str] = {}
         # 3. Rectify the cloud, if one came with the tracks.
         if "cloud" in ctx.inputs:
             ctx.progress("rectifying", 0.85)
-            cloud = read_ply(ctx.inputs["cloud"])
-            xyz = rectify(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
-            ctx.progress("writing", 0.95)
-            write_ply(ctx.output_path("cloud.ply"), TimedCloud(xyz, cloud.t_s, cloud.fields))
-            artifacts["cloud"] = "cloud.ply"
+            artifacts["cloud"] = _rectified(ctx, read_ply(ctx.inputs["cloud"]), result)
         return JobOutput(result=result.model_dump(mode="json"), artifacts=artifacts)
+
+    def _run_frames(self, ctx: JobContext, options: EstimateOptions) -> JobOutput:
+        # 1. Split the cloud into frames and lines.
+        ctx.progress("assembling", 0.01)
+        frames = read_frames(ctx.inputs["frames"], frame_period_s=options.frame_period_s)
+        # 2-4. Register, initialize and refine (stages reported by the estimator).
+        result = estimate_from_frames(frames, options, progress=lambda stage, f: ctx.progress(stage, 0.03 + 0.85 * f))
+        # 5. Rectify every point to the reference time.
+        ctx.progress("rectifying", 0.9)
+        return JobOutput(
+            result=result.model_dump(mode="json"), artifacts={"cloud": _rectified(ctx, frames.cloud, result)}
+        )
 
     def report(self, job: FinishedJob) -> str:
         # Truth beside the estimate when the input was simulated.
+        frames = "frames" in job.inputs
+        distorted = read_ply(job.inputs["cloud"]) if "cloud" in job.inputs else None
+        if frames:
+            distorted = read_frames(job.inputs["frames"], frame_period_s=job_period(job)).cloud
         inputs = ReportInputs(
             result=MotionResult.model_validate(job.result),
             title=f"Job {job.id}",
-            tracks=read_tracks(job.inputs["tracks"]),
-            distorted=read_ply(job.inputs["cloud"]) if "cloud" in job.inputs else None,
+            tracks=None if frames else read_tracks(job.inputs["tracks"]),
+            distorted=distorted,
             rectified=read_ply(job.artifacts["cloud"]) if "cloud" in job.artifacts else None,
             truth=load_truth(job.inputs["truth"]) if "truth" in job.inputs else None,
         )
         return build_report(inputs)
+
+
+def job_period(job: FinishedJob) -> float | None:
+    return EstimateOptions.model_validate(job.options).frame_period_s
+
+
+def _rectified(ctx: JobContext, cloud: TimedCloud, result: MotionResult) -> str:
+    """Write ``cloud`` rectified to the result's reference time, every original field kept."""
+    xyz = rectify(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
+    ctx.progress("writing", 0.95)
+    write_ply(ctx.output_path("cloud.ply"), TimedCloud(xyz, cloud.t_s, cloud.fields))
+    return "cloud.ply"
+
+
+def _check_points(points: int, limits: Limits, field: str) -> None:
+    if points > limits.max_cloud_points:
+        raise LimitExceededError(f"{field} has {points} points; the limit is {limits.max_cloud_points}", field=field)
 
 
 def _check_tracks(tracks: Tracks, limits: Limits) -> None:

@@ -71,7 +71,7 @@ class JobService:
                 )
                 for field, src in files.items()
             }
-            inputs = kind.accept_files(stored, self.limits)
+            inputs = kind.accept_files(stored, self.limits, opts)
         except BaseException:
             self.artifacts.delete(job_id)
             raise
@@ -129,6 +129,7 @@ class JobService:
             finished = FinishedJob(
                 id=job.id,
                 result=job.result or {},
+                options=job.options,
                 inputs={k: self.artifacts.path(job.id, v) for k, v in job.input.items()},
                 artifacts={k: self.artifacts.path(job.id, v) for k, v in job.artifacts.items()},
             )

@@ -1,0 +1,346 @@
+"""Motion from dense line-scan frames, without feature tracks.
+
+Recipe:
+1. Register consecutive frames rigidly (FPFH + RANSAC + ICP) and drop pairs whose rotation
+   disagrees with the rest (a symmetric target can register onto a turned copy of itself).
+2. Initialize by the closed-form cone (method.md section 5) on those transforms; re-time each
+   frame to its mean time with that motion, register again by ICP from the predicted
+   transforms, and fit the cone once more.
+3. Refine all 9 parameters by the dense continuous-time fit (:mod:`tumblescan.dense`).
+4. Choose the model: keep spin-precession unless the precession rate is not significantly
+   different from 0 (Wald test at ``significance``); then refit spin-only.
+5. Validate (paper eq. 11): solve again from the first frames only, from their own
+   registrations, and compare.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+from scipy.spatial.transform import Rotation
+from threadpoolctl import threadpool_limits
+
+from .dense import DenseFit, DensePoints, refine_dense, subsample
+from .errors import InputError
+from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
+from .frames import Frames
+from .initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
+from .motion import rotate
+from .registration import PairTransforms, consistent_pairs, extent_m, register_consecutive, voxel_size_m
+from .result import MotionResult
+from .sensor import SensorNoise
+from .uncertainty import Similarity, similarity
+
+FloatArray = NDArray[np.float64]
+Progress = Callable[[str, float], None]
+
+# Registration works on a thinned copy of each frame: this many points at most.
+REGISTRATION_POINTS = 60_000
+RETIME_PASSES = 2
+TARGET_VOXEL_FRACTION = 1 / 130
+SOURCE_VOXEL_FRACTION = 1 / 80
+# Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
+NOISE_FREE_RMS_M = 1e-7
+
+
+class FramesUnusableError(InputError):
+    code = "frames_unusable"
+
+
+@dataclass(frozen=True)
+class _Solve:
+    fit: DenseFit
+    initial: InitialGuess
+    pairs_used: int
+
+
+def estimate_from_frames(
+    frames: Frames, options: EstimateOptions | None = None, *, progress: Progress | None = None
+) -> MotionResult:
+    """Estimate the target's motion from dense line-scan frames (see the module docstring).
+
+    Parameters
+    ----------
+    frames : Frames
+        Points with per-point times, split into frames (:func:`tumblescan.assemble_frames`).
+    options : EstimateOptions, optional
+        Reference time ``T`` (default: the first point's time), model choice, seed, sensor
+        noise, validation frame count, significance and ``dense`` sampling settings.
+    progress : callable, optional
+        ``progress(stage, fraction)`` with stages ``registering``, ``initializing``,
+        ``refining`` and ``validating``; it may raise to abandon the estimate.
+
+    Returns
+    -------
+    MotionResult
+        As for tracks; ``fit.source`` is ``frames`` and ``fit.frame_rms_m`` gives each
+        frame's point-to-plane residual.
+    """
+    report = progress or (lambda stage, fraction: None)
+    with threadpool_limits(1, user_api="blas"):
+        return _estimate(frames, options or EstimateOptions(), report)
+
+
+def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> MotionResult:
+    started = time.perf_counter()
+    cloud = frames.cloud
+    T = float(cloud.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
+    n_frames = frames.n_frames
+    n2 = validation_frame_count(n_frames, opts.validation_frames)
+    # 1. Thin every frame for registration and sampling (times kept per point).
+    thin = _thin(frames, opts.seed)
+    xyz, tau, frame = cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin]
+    per_frame = [xyz[frame == f] for f in range(n_frames)]
+    extent, voxel = extent_m(per_frame), voxel_size_m(per_frame)
+    # The dense fit samples the full cloud: thinning first would leave holes in the local planes.
+    points = subsample(
+        cloud.xyz_m,
+        cloud.t_s - T,
+        frames.frame,
+        target_voxel_m=opts.dense.target_voxel_m or extent * TARGET_VOXEL_FRACTION,
+        source_voxel_m=opts.dense.source_voxel_m or extent * SOURCE_VOXEL_FRACTION,
+        seed=opts.seed,
+    )
+    noise = opts.sensor or SensorNoise()
+    warnings: list[str] = []
+    # 2-3. Register, initialize and refine on all frames.
+    progress("registering", 0.0)
+    global_pairs = _register(xyz, tau, frame, n_frames, voxel, opts.seed, None)
+    main = _solve(points, global_pairs, n_frames, opts, noise, progress, (0.1, 0.65), warnings)
+    fit = main.fit
+    # 4. Model choice.
+    if opts.model == "spin-only" or (opts.model == "auto" and _precession_insignificant(fit, opts, warnings)):
+        progress("refining", 0.66)
+        fit = refine_dense(
+            points, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise_floor_m=_floor(noise)
+        )
+    # 5. Validate with the first n2 frames, from their own registrations.
+    check: Similarity | None = None
+    if n2 < n_frames:
+        progress("validating", 0.7)
+        check = _validate(points, global_pairs, n2, fit, opts, noise, progress, warnings)
+    else:
+        warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
+    if check is not None and not check.passed:
+        warnings.append(
+            f"two-frame-count check failed: solutions from {n_frames} and {n2} frames differ by "
+            f"{check.distance:.3g} (threshold {check.threshold:.3g}); treat the estimate with caution"
+        )
+    progress("estimated", 1.0)
+    return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+
+
+def _thin(frames: Frames, seed: int) -> NDArray[np.int64]:
+    """At most ``REGISTRATION_POINTS`` points per frame, chosen at random (seeded)."""
+    rng = np.random.default_rng(seed)
+    keep = []
+    order = np.argsort(frames.frame, kind="stable")
+    bounds = np.searchsorted(frames.frame[order], np.arange(frames.n_frames + 1))
+    for f in range(frames.n_frames):
+        idx = order[bounds[f] : bounds[f + 1]]
+        if len(idx) > REGISTRATION_POINTS:
+            idx = rng.choice(idx, REGISTRATION_POINTS, replace=False)
+        keep.append(idx)
+    return np.sort(np.concatenate(keep))
+
+
+def _floor(noise: SensorNoise) -> float:
+    return float(noise.range_sigma_m)
+
+
+def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> FloatArray:
+    return np.asarray(np.bincount(frame, weights=tau, minlength=n_frames) / np.bincount(frame, minlength=n_frames))
+
+
+def _register(
+    xyz: FloatArray,
+    tau: FloatArray,
+    frame: NDArray[np.int64],
+    n_frames: int,
+    voxel_m: float,
+    seed: int,
+    previous: PairTransforms | None,
+) -> PairTransforms:
+    """Register consecutive frames. Given a previous registration, each frame is first
+    re-timed to its mean time with the angular velocity that registration implies around it
+    (removing the in-frame smear), and ICP starts from the previous transforms."""
+    if previous is not None:
+        xyz = _retimed(xyz, tau, frame, _frame_taus(tau, frame, n_frames), previous)
+    per_frame = [xyz[frame == f] for f in range(n_frames)]
+    return register_consecutive(per_frame, voxel_m=voxel_m, initial=previous, seed=seed)
+
+
+def _retimed(
+    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms
+) -> FloatArray:
+    """Points moved to their frame's mean time, rotating about the transforms' common fixed point
+    at the mean angular velocity of the consistent pairs just before and after each frame."""
+    ok = consistent_pairs(pairs)
+    rotvec = Rotation.from_matrix(pairs.R).as_rotvec() / np.diff(mid)[:, None]
+    omega = np.empty((len(mid), 3))
+    for f in range(len(mid)):
+        near = [k for k in (f - 1, f) if 0 <= k < len(ok) and ok[k]]
+        omega[f] = rotvec[near].mean(axis=0) if near else np.median(rotvec[ok], axis=0)
+    center = center_from_transforms(pairs.R[ok], pairs.t[ok])
+    w = omega[frame]
+    rate = np.linalg.norm(w, axis=1)
+    axis = w / np.maximum(rate, 1e-300)[:, None]
+    return np.asarray(center + rotate(axis, rate * (mid[frame] - tau), xyz - center), dtype=float)
+
+
+def _initial(pairs: PairTransforms, mid: FloatArray, n_frames: int, warnings: list[str]) -> tuple[InitialGuess, int]:
+    ok = consistent_pairs(pairs)
+    k = np.flatnonzero(ok)
+    if len(k) < 3:
+        raise FramesUnusableError(
+            f"only {len(k)} of {len(ok)} consecutive frame pairs could be registered consistently; the initial "
+            "motion needs 3 (do the frames overlap, and is the target rotating less than ~90 degrees per frame?)",
+            field="file",
+        )
+    if len(k) < len(ok):
+        warnings.append(
+            f"{len(ok) - len(k)} of {len(ok)} frame pairs registered inconsistently (a symmetric target can match a "
+            "turned copy of itself); the initial motion used the others"
+        )
+    try:
+        guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
+    except InitializerError as exc:
+        raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
+    return guess, len(k)
+
+
+def _solve(
+    points: DensePoints,
+    global_pairs: PairTransforms,
+    n_frames: int,
+    opts: EstimateOptions,
+    noise: SensorNoise,
+    progress: Progress,
+    span: tuple[float, float],
+    warnings: list[str],
+) -> _Solve:
+    """Initialize from the registrations of the first ``n_frames`` frames, then refine."""
+    lo, hi = span
+    sel = points.frame < n_frames
+    xyz, line, frame = points.xyz_m[sel], points.line[sel], points.frame[sel]
+    tau = points.tau_s[line]
+    mid = _frame_taus(tau, frame, n_frames)
+    pairs = _slice_pairs(global_pairs, n_frames - 1)
+    # Re-timed registration passes: the in-frame smear no longer biases the rotations.
+    voxel = voxel_size_m([xyz[frame == f] for f in range(n_frames)])
+    for p in range(RETIME_PASSES):
+        progress("registering", lo + 0.1 * (hi - lo) * (p + 1) / RETIME_PASSES)
+        pairs = _register(xyz, tau, frame, n_frames, voxel, opts.seed, pairs)
+    progress("initializing", lo + 0.1 * (hi - lo))
+    guess, used = _initial(pairs, mid, n_frames, warnings)
+    progress("refining", lo + 0.2 * (hi - lo))
+    sub = _subset(points, n_frames)
+
+    def on_step(step: int, total: int) -> None:
+        progress("refining", lo + (0.2 + 0.8 * step / total) * (hi - lo))
+
+    fit = refine_dense(
+        sub, guess.x, config=opts.dense, noise_floor_m=_floor(noise), seed=opts.seed, on_iteration=on_step
+    )
+    return _Solve(fit, guess, used)
+
+
+def _slice_pairs(p: PairTransforms, n: int) -> PairTransforms:
+    return PairTransforms(p.R[:n], p.t[:n], p.fitness[:n], p.rmse_m[:n])
+
+
+def _subset(points: DensePoints, n_frames: int) -> DensePoints:
+    if n_frames >= points.n_frames:
+        return points
+    keep = points.frame < n_frames
+    new_index = np.cumsum(keep) - 1
+    sources = new_index[points.sources[keep[points.sources]]]
+    return DensePoints(
+        points.xyz_m[keep], points.frame[keep], points.line[keep], points.tau_s, sources.astype(np.int64), n_frames
+    )
+
+
+def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: list[str]) -> bool:
+    sd = float(np.sqrt(fit.cov[5, 5]))
+    z = abs(float(fit.x[5])) / sd if sd > 0 else np.inf
+    p_value = float(2 * stats.norm.sf(z))
+    if p_value < opts.significance:
+        return False
+    warnings.append(
+        f"no significant precession (Wald test p={p_value:.3g}): reporting the spin-only model; the precession "
+        "axis and the centre's position along the spin axis are unobservable"
+    )
+    return True
+
+
+def _validate(
+    points: DensePoints,
+    global_pairs: PairTransforms,
+    n2: int,
+    fit: DenseFit,
+    opts: EstimateOptions,
+    noise: SensorNoise,
+    progress: Progress,
+    warnings: list[str],
+) -> Similarity:
+    try:
+        second = _solve(points, global_pairs, n2, opts, noise, progress, (0.7, 0.98), [])
+    except FramesUnusableError as exc:
+        warnings.append(f"second solve with {n2} frames could not start: {exc}")
+        return Similarity(False, float("inf"), float("nan"), "skipped")
+    sub = second.fit
+    if fit.spin_only:
+        sub = refine_dense(
+            _subset(points, n2),
+            second.initial.x_spin_only,
+            spin_only=True,
+            config=opts.dense,
+            noise_floor_m=_floor(noise),
+        )
+    noise_scale = 1.0 if fit.rms_m > NOISE_FREE_RMS_M else 0.0
+    return similarity(fit.x, sub.x, sub.cov, free=fit.free, noise_scale=noise_scale, alpha=opts.significance)
+
+
+def _result(
+    frames: Frames,
+    fit: DenseFit,
+    main: _Solve,
+    check: Similarity | None,
+    n2: int,
+    T: float,
+    warnings: list[str],
+    elapsed_s: float,
+) -> MotionResult:
+    x = fit.x
+    center = x[6:9]
+    if fit.spin_only:
+        center = nearest_on_spin_axis(x, frames.cloud.xyz_m.mean(axis=0))
+    frame_rms = [None if not np.isfinite(v) else float(v) for v in fit.frame_rms_m]
+    return MotionResult.model_validate(
+        {
+            **motion_fields(x, fit.cov, spin_only=fit.spin_only, center_m=center, reference_time_s=T),
+            "fit": {
+                "rms_residual_m": fit.rms_m,
+                "observations": len(frames.cloud),
+                "tracks": 0,
+                "frames": frames.n_frames,
+                "outliers": 0,
+                "source": "frames",
+                "points_used": fit.sources,
+                "frame_rms_m": frame_rms,
+            },
+            "validation": validation_fields(check, frames.n_frames, n2),
+            "solver": {
+                "path": f"registration+cone+dense ({main.pairs_used} frame pairs)",
+                "iterations": fit.iterations,
+                "attempts": 1,
+                "elapsed_s": elapsed_s,
+            },
+            "warnings": warnings,
+        }
+    )

@@ -1,0 +1,212 @@
+"""Motion from dense frames alone: a seeded simulate -> estimate -> compare round trip, every
+input format, the bad inputs, the CLI and the service."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from tumblescan import (
+    FrameCloud,
+    Motion,
+    MotionResult,
+    Scanner,
+    Scene,
+    TimedCloud,
+    estimate_from_frames,
+    random_motion,
+    read_frames,
+    read_ply,
+    rectify,
+    simulate_frames,
+    write_ply,
+)
+from tumblescan.errors import InputError
+
+from .live import serve
+
+SEED = 1
+SCANNER = Scanner(lines=128, pixels=128)
+
+
+@pytest.fixture(scope="module")
+def simulated() -> tuple[Motion, FrameCloud]:
+    motion = random_motion(np.random.default_rng(SEED))
+    return motion, simulate_frames(motion, Scene(scanner=SCANNER), seed=SEED)
+
+
+@pytest.fixture(scope="module")
+def frames_ply(simulated: tuple[Motion, FrameCloud], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    _, sim = simulated
+    path = tmp_path_factory.mktemp("dense") / "frames.ply"
+    intensity = np.linspace(0, 1, len(sim.t_s)).astype(np.float32)
+    write_ply(path, TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line, "intensity": intensity}))
+    return path
+
+
+@pytest.fixture(scope="module")
+def estimated(frames_ply: Path) -> MotionResult:
+    return estimate_from_frames(read_frames(frames_ply))
+
+
+def _angle_deg(a: object, b: object) -> float:
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))  # type: ignore[call-overload]
+
+
+def test_round_trip_recovers_the_motion_within_its_uncertainty(
+    simulated: tuple[Motion, FrameCloud], estimated: MotionResult
+) -> None:
+    truth = simulated[0].canonical().at_reference(estimated.reference_time_s)
+    r, u = estimated, estimated.uncertainty
+    assert r.model == "spin-precession"
+    assert r.precession.axis is not None and u.precession_axis_deg is not None
+    # Within 4 sigma, and the sigmas themselves small: dense data pin the motion down.
+    assert _angle_deg(r.spin.axis, truth.spin_axis) < 4 * u.spin_axis_deg < 0.5
+    assert _angle_deg(r.precession.axis, truth.precession_axis) < 4 * u.precession_axis_deg < 1.0
+    assert abs(r.spin.rate_deg_s - np.degrees(truth.spin_rate_rad_s)) < 4 * u.spin_rate_deg_s < 0.1
+    assert abs(r.precession.rate_deg_s - np.degrees(truth.precession_rate_rad_s)) < 4 * u.precession_rate_deg_s < 0.1
+    assert np.linalg.norm(np.subtract(r.precession.center_m, truth.center_m)) < 0.05
+    assert r.validation.passed and r.validation.test == "covariance"
+
+
+def test_fit_describes_the_points_and_each_frame(estimated: MotionResult) -> None:
+    fit = estimated.fit
+    assert fit.source == "frames" and fit.tracks == 0 and fit.frames == 15
+    assert fit.points_used is not None and 1000 < fit.points_used < fit.observations
+    assert fit.frame_rms_m is not None and len(fit.frame_rms_m) == 15
+    # Residuals near the 2 cm range noise projected on the surface normals: no frame fits badly.
+    assert all(v is not None and 0.003 < v < 0.04 for v in fit.frame_rms_m)
+
+
+def test_rectified_cloud_matches_the_truth_within_a_centimetre(
+    simulated: tuple[Motion, FrameCloud], estimated: MotionResult
+) -> None:
+    motion, sim = simulated
+    T = estimated.reference_time_s
+    got = rectify(sim.xyz_m, sim.t_s, estimated.motion(), to_time_s=T)
+    want = rectify(sim.xyz_m, sim.t_s, motion, to_time_s=T)
+    assert float(np.mean(np.linalg.norm(got - want, axis=1))) < 0.01
+
+
+def test_point_npz_and_range_images_give_the_same_frames_as_ply(
+    simulated: tuple[Motion, FrameCloud], frames_ply: Path, tmp_path: Path
+) -> None:
+    _, sim = simulated
+    from_ply = read_frames(frames_ply)
+    np.savez(tmp_path / "points.npz", xyz_m=sim.xyz_m, t_s=sim.t_s, frame=sim.frame, line=sim.line)
+    from_points = read_frames(tmp_path / "points.npz")
+    # Range images: frames x lines x pixels, 0 where a ray had no return.
+    rng_m = np.zeros((15, SCANNER.lines, SCANNER.pixels))
+    rng_m[sim.frame, sim.line, sim.pixel] = np.linalg.norm(sim.xyz_true_m, axis=1)
+    times = SCANNER.line_times_s(15)
+    np.savez(
+        tmp_path / "ranges.npz",
+        range_m=rng_m,
+        t_s=times,
+        azimuth_deg=np.degrees(SCANNER.azimuths_rad()),
+        elevation_deg=np.degrees(SCANNER.elevations_rad()),
+    )
+    from_ranges = read_frames(tmp_path / "ranges.npz")
+    for f in (from_points, from_ranges):
+        assert f.n_frames == 15 and len(f.cloud) == len(sim.t_s)
+        assert np.array_equal(np.bincount(f.frame), np.bincount(from_ply.frame))
+    np.testing.assert_allclose(from_points.cloud.xyz_m, from_ply.cloud.xyz_m)
+    # The range images hold the noise-free hits: the same points up to rounding, in scan order.
+    order = np.lexsort((sim.pixel, sim.line, sim.frame))
+    np.testing.assert_allclose(from_ranges.cloud.xyz_m, sim.xyz_true_m[order], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("arrays", "field", "words"),
+    [
+        ({"xyz_m": np.zeros((10, 2)), "t_s": np.zeros(10)}, "xyz_m", "(n, 3)"),
+        ({"xyz_m": np.zeros((10, 3)), "t_s": np.zeros(9)}, "t_s", "one time per point"),
+        ({"xyz_m": np.zeros((10, 3))}, "t_s", "lacks t_s"),
+        ({"xyz_m": np.zeros((10, 3)), "t_s": np.zeros(10), "colour": np.zeros(10)}, "colour", "unexpected"),
+        ({"xyz_m": np.zeros((10, 3)), "t_s": np.zeros(10), "frame": np.full(10, 0.5)}, "frame", "integer"),
+    ],
+)
+def test_bad_point_npz_names_the_array(tmp_path: Path, arrays: dict[str, np.ndarray], field: str, words: str) -> None:
+    np.savez(tmp_path / "bad.npz", **arrays)  # type: ignore[arg-type]
+    with pytest.raises(InputError) as err:
+        read_frames(tmp_path / "bad.npz")
+    assert err.value.field == field and words in str(err.value)
+
+
+def test_frames_given_one_time_each_are_refused(simulated: tuple[Motion, FrameCloud], tmp_path: Path) -> None:
+    _, sim = simulated
+    # A common mistake: every point stamped with its frame's time instead of its line's.
+    write_ply(tmp_path / "snap.ply", TimedCloud(sim.xyz_m, sim.frame.astype(float), {"frame": sim.frame}))
+    with pytest.raises(InputError, match="times do not vary within frame 0"):
+        read_frames(tmp_path / "snap.ply")
+
+
+def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, estimated: MotionResult) -> None:
+    out = frames_ply.with_name("cli-rectified.ply")
+    proc = subprocess.run(
+        [sys.executable, "-m", "tumblescan", "estimate", str(frames_ply), "--json", "--rectified", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = MotionResult.model_validate_json(proc.stdout)
+    assert result.spin.rate_deg_s == pytest.approx(estimated.spin.rate_deg_s, abs=1e-9)
+    original, rectified = read_ply(frames_ply), read_ply(out)
+    assert len(rectified) == len(original)
+    assert set(rectified.fields) == {"frame", "line", "intensity"}
+    np.testing.assert_array_equal(rectified.fields["intensity"], original.fields["intensity"])
+
+
+@pytest.fixture(scope="module")
+def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
+    with serve(tmp_path_factory.mktemp("dense-svc") / "data") as url, httpx.Client(base_url=url, timeout=60) as c:
+        yield c
+
+
+def test_upload_of_frames_returns_the_motion_and_the_rectified_cloud(
+    http: httpx.Client, frames_ply: Path, estimated: MotionResult, tmp_path: Path
+) -> None:
+    with open(frames_ply, "rb") as fh:
+        r = http.post("/v1/jobs/upload", files={"file": ("frames.ply", fh)})
+    assert r.status_code == 202, r.text
+    stages = set()
+    job = r.json()
+    while job["status"] not in ("succeeded", "failed", "cancelled"):
+        stages.add(job["stage"])
+        job = http.get(f"/v1/jobs/{job['id']}", params={"wait": 1}).json()
+    assert job["status"] == "succeeded", job
+    # The long stages are seen while polling once a second.
+    assert {"refining"} <= stages, stages
+    assert job["result"]["spin"]["rate_deg_s"] == pytest.approx(estimated.spin.rate_deg_s, abs=1e-9)
+    cloud = http.get(job["artifacts"]["cloud"])
+    (tmp_path / "out.ply").write_bytes(cloud.content)
+    assert len(read_ply(tmp_path / "out.ply")) == len(read_ply(frames_ply))
+    page = http.get(f"/v1/jobs/{job['id']}/report")
+    assert page.status_code == 200 and "Point-to-plane residuals per frame" in page.text
+
+
+def test_bad_frame_uploads_are_422_naming_the_field(http: httpx.Client, frames_ply: Path, tmp_path: Path) -> None:
+    three = tmp_path / "three.ply"
+    frame = np.repeat(np.arange(3), 10).astype(np.int32)
+    write_ply(three, TimedCloud(np.ones((30, 3)), frame + np.tile(np.arange(10) * 0.01, 3), {"frame": frame}))
+    r = http.post("/v1/jobs/upload", files={"file": ("three.ply", three.read_bytes())})
+    assert r.status_code == 422 and r.json()["detail"]["code"] == "too_few_frames", r.text
+    assert "at least 4" in r.json()["detail"]["message"]
+    with open(frames_ply, "rb") as fh:
+        body = fh.read()
+    r = http.post("/v1/jobs/upload", files={"file": ("f.ply", body), "cloud": ("c.ply", body)})
+    assert r.status_code == 422 and r.json()["detail"]["field"] == "cloud"
+    r = http.post("/v1/jobs/upload", files={"file": ("f.npz", b"PK\x03\x04 not really")})
+    assert r.status_code == 422 and r.json()["detail"]["field"] == "file"
+    r = http.post(
+        "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"frame_period_s": -1})}
+    )
+    assert r.status_code == 422 and "frame_period_s" in r.text
