@@ -136,7 +136,7 @@ def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
 
 
 def submit(
-    file: Annotated[Path, typer.Argument(help="tracks (JSON or CSV)")],
+    file: Annotated[Path, typer.Argument(help="tracks (JSON or CSV) or dense frames (PLY or NPZ)")],
     cloud: Annotated[Path | None, typer.Option(help="PLY with per-point times to rectify")] = None,
     truth: Annotated[Path | None, typer.Option(help="truth.json of a simulation, shown in the report")] = None,
     options: Annotated[str, typer.Option(help="job options as JSON")] = "{}",
