@@ -57,8 +57,8 @@ class DenseConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    target_voxel_m: float | None = Field(None, gt=0, description="default: target extent / 250")
-    source_voxel_m: float | None = Field(None, gt=0, description="default: target extent / 40")
+    target_voxel_m: float | None = Field(None, gt=0, description="default (estimate_from_frames): target extent / 130")
+    source_voxel_m: float | None = Field(None, gt=0, description="default (estimate_from_frames): target extent / 80")
     pairs_per_source: int = Field(6, ge=1, le=1000, description="later frames each source point is matched in")
     neighbours: int = Field(12, ge=5, le=100, description="points in each normal estimate")
     near_window: int = Field(2, ge=1, le=100, description="frames paired with each frame in the first stage")
@@ -82,7 +82,6 @@ class DenseFit:
     residuals: int
     sources: int
     iterations: int
-    noise_scale: float
 
     @property
     def spin_only(self) -> bool:
@@ -162,9 +161,10 @@ class _Mapping:
         """``dM/dx_free`` for each point, ``(n, 3, k)``; the centre enters as ``(I - R^T)``."""
         v = xyz - self.center
         d = np.einsum("knij,nj->nik", self.dRt[:, line], v)
+        Rt = self.Rt[line]
         for j, p in enumerate(self.free):
             if p >= 6:
-                d[:, :, j] += np.eye(3)[p - 6] - self.Rt[line][:, :, p - 6]
+                d[:, :, j] += np.eye(3)[p - 6] - Rt[:, :, p - 6]
         return np.asarray(d)
 
 
@@ -226,9 +226,8 @@ def _sensor_at_reference(x: FloatArray, tau_s: float) -> FloatArray:
 
 @dataclass(frozen=True)
 class _Matches:
-    src: IntArray
+    src: IntArray  # source point of each residual (also its cluster in the sandwich covariance)
     dst: IntArray
-    cluster: IntArray  # source point of each residual (for the sandwich covariance)
 
 
 def _match(
@@ -256,7 +255,7 @@ def _match(
         dst_all.append(dst[ok2])
     src_c = np.concatenate(src_all) if src_all else np.zeros(0, np.int64)
     dst_c = np.concatenate(dst_all) if dst_all else np.zeros(0, np.int64)
-    return _Matches(src_c, dst_c, src_c)
+    return _Matches(src_c, dst_c)
 
 
 def _residuals(points: DensePoints, mapping: _Mapping, surf: _Surfaces, m: _Matches) -> FloatArray:
@@ -271,6 +270,10 @@ def _jacobian(points: DensePoints, mapping: _Mapping, surf: _Surfaces, m: _Match
     dq = mapping.derivative(surf.anchor_obs[m.dst], points.line[m.dst])
     n = mapping.rotate(surf.normal_obs[m.dst], points.line[m.dst])
     return np.asarray(np.einsum("ni,nik->nk", n, dp - dq))
+
+
+def _cauchy_weights(r: FloatArray, sigma: float) -> FloatArray:
+    return np.asarray(1.0 / (1.0 + (r / (CAUCHY_C * sigma)) ** 2))
 
 
 def _robust_sigma(r: FloatArray) -> float:
@@ -373,7 +376,7 @@ def _iterate(
         r = _residuals(points, mapping, surf, matches)
         J = _jacobian(points, mapping, surf, matches)
         sigma = max(_robust_sigma(r), problem.noise_floor_m / 10)
-        w = 1.0 / (1.0 + (r / (CAUCHY_C * sigma)) ** 2)
+        w = _cauchy_weights(r, sigma)
         rows, rhs = J * np.sqrt(w)[:, None], -r * np.sqrt(w)
         rows, rhs = _with_gauge(problem, mapping, rows, rhs)
         dz = np.linalg.lstsq(rows, rhs, rcond=None)[0]
@@ -395,19 +398,26 @@ def _iterate(
     return z, matches, surf, step
 
 
+def _gauge_row(problem: _Problem, x: FloatArray) -> FloatArray | None:
+    """Spin-only: ``d/dz [l_s . (O - gauge_point)]`` (the centre's slide along the spin axis), else None."""
+    if problem.gauge_point is None:
+        return None
+    row = np.zeros(len(problem.free))
+    row[list(problem.free).index(6) :] = axis_from_angles(x[0], x[1])
+    return row
+
+
 def _with_gauge(
     problem: _Problem, mapping: _Mapping, rows: FloatArray, rhs: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Spin-only: one heavy row pinning the centre to the axis point nearest the gauge point."""
-    if problem.gauge_point is None:
+    row = _gauge_row(problem, mapping.x)
+    if row is None or problem.gauge_point is None:
         return rows, rhs
     x = mapping.x
-    l_s = axis_from_angles(x[0], x[1])
     weight = 1e3 * max(float(np.sqrt(np.mean(rows**2))), 1.0)
-    g_row = np.zeros(len(problem.free))
-    g_row[list(problem.free).index(6) :] = l_s * weight
-    g_val = -float(l_s @ (x[6:9] - problem.gauge_point)) * weight
-    return np.vstack([rows, g_row]), np.append(rhs, g_val)
+    g_val = -float(row[-3:] @ (x[6:9] - problem.gauge_point)) * weight
+    return np.vstack([rows, row * weight]), np.append(rhs, g_val)
 
 
 def _extent(points: DensePoints) -> float:
@@ -422,8 +432,8 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfaces, step
     r = _residuals(points, mapping, surf, m)
     J = _jacobian(points, mapping, surf, m)
     sigma = max(_robust_sigma(r), 1e-15)
-    w = 1.0 / (1.0 + (r / (CAUCHY_C * sigma)) ** 2)
-    cov_free = _sandwich(J, r, w, m.cluster, problem)
+    w = _cauchy_weights(r, sigma)
+    cov_free = _sandwich(J, r, w, m.src, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
@@ -442,13 +452,14 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfaces, step
         rms_m=float(np.sqrt(np.mean(r[inlier] ** 2))) if inlier.any() else float("nan"),
         frame_rms_m=frame_rms,
         residuals=len(r),
-        sources=len(np.unique(m.cluster)),
+        sources=len(np.unique(m.src)),
         iterations=steps,
-        noise_scale=1.0,
     )
 
 
-def _sandwich(J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, problem: _Problem) -> FloatArray:
+def _sandwich(
+    J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, gauge_row: FloatArray | None
+) -> FloatArray:
     """``H^-1 B H^-1``: ``H = J^T W J``, ``B`` sums each source point's gradient outer product."""
     Jw = J * w[:, None]
     H = J.T @ Jw
@@ -457,12 +468,8 @@ def _sandwich(J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, pr
     G = np.zeros((int(inv.max()) + 1 if len(inv) else 0, J.shape[1]))
     np.add.at(G, inv, g)
     B = G.T @ G
-    if problem.gauge_point is not None:
+    if gauge_row is not None:
         # The gauge row fixes the centre's slide along the spin axis (see _with_gauge).
-        x = problem.full(np.zeros(0)) if not problem.free else problem.base
-        l_s = axis_from_angles(x[0], x[1])
-        row = np.zeros(J.shape[1])
-        row[list(problem.free).index(6) :] = l_s
-        H = H + np.outer(row, row) * 1e6 * np.trace(H)
+        H = H + np.outer(gauge_row, gauge_row) * 1e6 * np.trace(H)
     Hinv = np.linalg.pinv(H, rcond=1e-12)
     return np.asarray(Hinv @ B @ Hinv, dtype=float)
