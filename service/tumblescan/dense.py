@@ -4,32 +4,34 @@ Every point ``p`` seen at ``t = T + tau`` maps to the reference time as
 
     M(p, tau; x) = O_p + R(tau)^T (p - O_p)
 
-and with the right motion the mapped frames coincide. For points ``p`` of frame ``a`` and
-their nearest mapped neighbours ``q`` in frame ``b`` the refinement minimizes the robust
-(Cauchy) sum of point-to-plane distances
+and with the right motion the mapped frames coincide. Each frame is cut into surfels: the
+points of one voxel (of ``surfel_m``, in the frame's own coordinates), mapped to ``T`` with
+the current motion, give a centroid ``a`` and a normal ``n`` (principal axes). A surfel is
+attached to the line of its mean time, so it moves with the motion like a point. For a source
+point ``p`` of one frame and the nearest planar surfel of another, the residual is
 
-    r = n_q(x) . (M(p, tau_p; x) - M(q, tau_q; x))
+    r = n(x) . (M(p, tau_p; x) - a(x)),    var r = s^2 (v_p + v_a / count_a)
 
-over the 9 motion parameters ``x``, by Gauss-Newton steps with correspondences re-found
-after each step (as ICP does). ``n_q`` is the surface normal at ``q`` at its own observation
-time (principal axes of its neighbours in the mapped frame, re-estimated as the motion
-improves), turned to ``T`` with ``R(tau_q)^T``. Points on the same line share ``tau``, so
-the rotations and their derivatives are computed once per line, not per point.
+with ``v`` the sensor's variance along ``n`` (range noise along the line of sight, angle noise
+across it, ``SensorNoise``) and ``s`` a common scale estimated from the residuals. The fit
+minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
+Gauss-Newton steps, with correspondences re-found after each step (as ICP does) and the
+surfels rebuilt once the rotation has moved.
 
-Frames are subsampled twice: targets (one point per ``target`` voxel, normals and a
-planarity check) and, from those, sources (one per ``source`` voxel). The first stage pairs
-each frame with the next few only (their correspondences are right even from a rough start);
-the second pairs every frame with every later one, whose long time baselines fix the rates.
+Three stages: a few sources matched in the next frames only (right correspondences even from
+the initializer's rough start), then in any frame (the long time baselines fix the rates),
+then many sources from the converged start (precision: the covariance scales as 1/sources).
 
 Covariance: the sandwich ``H^-1 (sum_c g_c g_c^T) H^-1`` with ``H = J^T W J`` and ``g_c`` the
 gradient of all residuals of source point ``c`` (one point enters several pairs, so its noise
-is counted once), which is the Cramer-Rao-type bound for the points used.
+is counted once).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,6 +39,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
 from .motion import N_PARAMS, axis_from_angles, canonical_params, rotation_matrix
+from .sensor import SensorNoise, azimuth_elevation
 from .uncertainty import canonical_cov
 
 FloatArray = NDArray[np.float64]
@@ -47,9 +50,25 @@ SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
 CAUCHY_C = 2.385  # Cauchy constant for 95 % efficiency under Gaussian noise
 MAX_NORMAL_ANGLE_COS = np.cos(np.radians(45.0))
-MAX_CURVATURE = 0.03
-# Re-estimate normals once the rotational parameters have moved this much in all (radians).
-NORMAL_REFRESH_RAD = 1e-2  # smallest / summed eigenvalue of a neighbourhood: larger is an edge or a corner
+# A surfel is planar when its thinnest axis is this much thinner than the next one and no
+# thicker than a few sensor sigmas (an edge or a corner is thick for its size).
+MAX_FLATNESS = 0.3
+MAX_THICKNESS_SIGMAS = 2.5
+MIN_SURFEL_POINTS = 6
+# Neighbouring cells of one surface differ in range by less than this many surfel sizes.
+MAX_RANGE_STEP = 4.0
+# Rebuild the surfels, and re-find correspondences, once points have moved this share of a surfel.
+SURFEL_REFRESH = 0.25
+REMATCH = 0.05
+PROBE_POINTS = 2000
+# Levenberg-Marquardt damping: start undamped, tighten on a rise of the cost, relax on success.
+LM_START = 0.0
+LM_FIRST_TIGHT = 1e-4
+LM_TIGHTEN = 10.0
+LM_RELAX = 3.0
+LM_TRIES = 10
+# Spin-only: the centre's slide along the spin axis is pinned by a penalty this stiff (x trace H).
+GAUGE_STIFFNESS = 1e6
 
 
 class DenseConfig(BaseModel):
@@ -57,13 +76,16 @@ class DenseConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    target_voxel_m: float | None = Field(None, gt=0, description="default (estimate_from_frames): target extent / 130")
-    source_voxel_m: float | None = Field(None, gt=0, description="default (estimate_from_frames): target extent / 80")
-    pairs_per_source: int = Field(6, ge=1, le=1000, description="later frames each source point is matched in")
-    neighbours: int = Field(12, ge=5, le=100, description="points in each normal estimate")
-    near_window: int = Field(2, ge=1, le=100, description="frames paired with each frame in the first stage")
-    max_iterations: int = Field(20, ge=1, le=1000, description="Gauss-Newton steps per stage")
-    tolerance: float = Field(1e-5, gt=0, description="stop when no parameter moves more than this (rad, rad/s, m)")
+    surfel_m: float | None = Field(None, gt=0, description="surfel size; default (estimate_from_frames): extent / 100")
+    coarse_sources: int = Field(20_000, ge=100, description="source points of the first two stages")
+    sources: int = Field(200_000, ge=100, description="source points of the last stage")
+    partners: int = Field(2, ge=1, le=100, description="other frames each source point is matched in")
+    near_window: int = Field(2, ge=1, le=100, description="frames either side matched in the first stage")
+    max_iterations: int = Field(15, ge=1, le=1000, description="Gauss-Newton steps in each of the first two stages")
+    fine_iterations: int = Field(6, ge=1, le=1000, description="Gauss-Newton steps in the last stage")
+    tolerance: float = Field(
+        0.1, gt=0, le=1, description="stop a stage when no parameter moves more than this many standard deviations"
+    )
 
 
 @dataclass(frozen=True)
@@ -71,7 +93,7 @@ class DenseFit:
     """Result of :func:`refine_dense`: canonical 9-vector, its 9x9 covariance, fit statistics.
 
     rms_m: RMS point-to-plane residual of the inliers; frame_rms_m: the same per frame (as
-    source or target); residuals: inlier residuals used; sources: distinct source points.
+    source or target); residuals: residuals used; sources: distinct source points.
     """
 
     x: FloatArray
@@ -89,53 +111,85 @@ class DenseFit:
 
 
 @dataclass(frozen=True)
-class DensePoints:
-    """Subsampled frames: target points with frame, line-time index, and a source subset.
+class DenseData:
+    """Every point of the frames with its line time and surfel.
 
-    xyz_m: ``(n, 3)``; frame: ``(n,)``; line: ``(n,)`` index into ``tau_s`` (unique line
-    offsets from ``T``); sources: indices of the source points into ``xyz_m``.
+    xyz_m: ``(n, 3)`` sensor frame at observation; frame: ``(n,)``; line: ``(n,)`` index into
+    ``tau_s`` (distinct offsets from ``T``, s); cell: ``(n,)`` surfel index; cell_frame:
+    ``(m,)`` frame of each surfel.
     """
 
     xyz_m: FloatArray
     frame: IntArray
     line: IntArray
     tau_s: FloatArray
-    sources: IntArray
+    cell: IntArray
+    cell_frame: IntArray
     n_frames: int
+    surfel_m: float
+    extent_m: float
+    interior: NDArray[np.bool_]
 
-    def frame_sensor_tau(self) -> FloatArray:
-        """Mean line offset of each frame (where its sensor origin is taken)."""
-        t = self.tau_s[self.line]
-        return np.asarray(np.bincount(self.frame, weights=t) / np.bincount(self.frame), dtype=float)
-
-
-def subsample(
-    xyz_m: FloatArray,
-    tau_s: FloatArray,
-    frame: IntArray,
-    *,
-    target_voxel_m: float,
-    source_voxel_m: float,
-    seed: int = 0,
-) -> DensePoints:
-    """One point per target voxel per frame, and one per source voxel of those (seeded choice)."""
-    rng = np.random.default_rng(seed)
-    order = rng.permutation(len(xyz_m))
-    keep = order[_one_per_voxel(xyz_m[order], frame[order], target_voxel_m)]
-    keep.sort()
-    xyz, f = xyz_m[keep], frame[keep]
-    tau_u, line = np.unique(tau_s[keep], return_inverse=True)
-    shuffled = rng.permutation(len(xyz))
-    sources = np.sort(shuffled[_one_per_voxel(xyz[shuffled], f[shuffled], source_voxel_m)])
-    return DensePoints(xyz, f.astype(np.int64), line.astype(np.int64), tau_u, sources, int(f.max()) + 1)
+    def first_frames(self, n: int) -> DenseData:
+        """The same data restricted to frames ``0 .. n-1``."""
+        if n >= self.n_frames:
+            return self
+        keep = self.frame < n
+        kept_cells = self.cell_frame < n
+        new_cell = np.cumsum(kept_cells) - 1
+        return DenseData(
+            self.xyz_m[keep],
+            self.frame[keep],
+            self.line[keep],
+            self.tau_s,
+            new_cell[self.cell[keep]].astype(np.int64),
+            self.cell_frame[kept_cells],
+            n,
+            self.surfel_m,
+            self.extent_m,
+            self.interior[kept_cells],
+        )
 
 
-def _one_per_voxel(xyz: FloatArray, frame: IntArray, voxel_m: float) -> IntArray:
-    """Index of the first point in each (frame, voxel) cell."""
-    cell = np.floor((xyz - xyz.min(axis=0)) / voxel_m).astype(np.int64)
-    dims = cell.max(axis=0) + 1
-    key = ((frame.astype(np.int64) * dims[0] + cell[:, 0]) * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    return np.asarray(np.unique(key, return_index=True)[1], dtype=np.int64)
+def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: float) -> DenseData:
+    """Group points into lines (distinct ``tau_s``) and surfels: per frame, cells of the
+    sensor's view about ``surfel_m`` wide at the median range. Cells are cut in direction, not
+    in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
+    surface keeps the points that noise pushed inside, and its centroid is biased off the surface."""
+    tau_u, line = np.unique(tau_s, return_inverse=True)
+    az, el = azimuth_elevation(xyz_m)
+    step = surfel_m / float(np.median(np.linalg.norm(xyz_m, axis=1)))
+    a = np.floor((az - az.min()) / step).astype(np.int64)
+    e = np.floor((el - el.min()) / step).astype(np.int64)
+    f = frame.astype(np.int64)
+    dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
+    key = (f * dims[0] + a + 1) * dims[1] + e + 1
+    keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
+    rho = np.bincount(cell, np.linalg.norm(xyz_m, axis=1)) / np.bincount(cell)
+    return DenseData(
+        np.asarray(xyz_m, dtype=float),
+        f,
+        line.astype(np.int64),
+        tau_u,
+        cell.astype(np.int64),
+        f[first],
+        int(f.max()) + 1,
+        surfel_m,
+        float(np.linalg.norm(np.ptp(xyz_m, axis=0))),
+        _interior(keys, rho, dims[1], max_step_m=MAX_RANGE_STEP * surfel_m),
+    )
+
+
+def _interior(keys: IntArray, rho_m: FloatArray, stride: int, *, max_step_m: float) -> NDArray[np.bool_]:
+    """Cells whose 4 neighbours in the view were hit too, at nearly the same range: not on the
+    edge of the field of view, of the target's silhouette or of an occlusion, where a partner
+    frame sees a different part of the scene and a match would land on the wrong surface."""
+    ok = np.ones(len(keys), bool)
+    for offset in (-stride, stride, -1, 1):
+        nb = keys + offset
+        pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
+        ok &= (keys[pos] == nb) & (np.abs(rho_m[pos] - rho_m) <= max_step_m)
+    return ok
 
 
 class _Mapping:
@@ -143,13 +197,18 @@ class _Mapping:
 
     def __init__(self, x: FloatArray, tau_s: FloatArray, free: tuple[int, ...]) -> None:
         self.x = x
+        self.tau_s = tau_s
         self.Rt = _rotations_T(x.astype(complex)[None, :], tau_s)[0].real
-        probes = np.tile(x.astype(complex), (len(free), 1))
-        probes[np.arange(len(free)), list(free)] += 1j * STEP
-        dRt = _rotations_T(probes, tau_s).imag / STEP  # (k, lines, 3, 3)
         self.free = free
-        self.dRt = dRt
         self.center = x[6:9]
+
+    @cached_property
+    def dRt(self) -> FloatArray:
+        """``(lines, 9, k)``: row ``3a + b`` holds ``d(R^T)[a, b]`` for each free parameter."""
+        probes = np.tile(self.x.astype(complex), (len(self.free), 1))
+        probes[np.arange(len(self.free)), list(self.free)] += 1j * STEP
+        dRt = _rotations_T(probes, self.tau_s).imag / STEP  # (k, lines, 3, 3)
+        return np.ascontiguousarray(dRt.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(self.free)))
 
     def apply(self, xyz: FloatArray, line: IntArray) -> FloatArray:
         return np.asarray(self.center + np.einsum("nij,nj->ni", self.Rt[line], xyz - self.center))
@@ -157,15 +216,18 @@ class _Mapping:
     def rotate(self, v: FloatArray, line: IntArray) -> FloatArray:
         return np.asarray(np.einsum("nij,nj->ni", self.Rt[line], v))
 
-    def derivative(self, xyz: FloatArray, line: IntArray) -> FloatArray:
-        """``dM/dx_free`` for each point, ``(n, 3, k)``; the centre enters as ``(I - R^T)``."""
+    def normal_derivative(self, n: FloatArray, xyz: FloatArray, line: IntArray) -> FloatArray:
+        """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``; the centre enters as ``(I - R^T)``."""
         v = xyz - self.center
-        d = np.einsum("knij,nj->nik", self.dRt[:, line], v)
-        Rt = self.Rt[line]
+        out = np.zeros((len(xyz), len(self.free)))
+        for a in range(3):
+            for b in range(3):
+                out += (n[:, a] * v[:, b])[:, None] * self.dRt[line, 3 * a + b]
+        Rtn = np.einsum("nab,na->nb", self.Rt[line], n)
         for j, p in enumerate(self.free):
             if p >= 6:
-                d[:, :, j] += np.eye(3)[p - 6] - Rt[:, :, p - 6]
-        return np.asarray(d)
+                out[:, j] += n[:, p - 6] - Rtn[:, p - 6]
+        return out
 
 
 def _rotations_T(x: NDArray[np.complex128], tau_s: FloatArray) -> NDArray[np.complex128]:
@@ -177,117 +239,162 @@ def _rotations_T(x: NDArray[np.complex128], tau_s: FloatArray) -> NDArray[np.com
     return np.asarray(np.swapaxes(Rp @ Rs, -1, -2))
 
 
+def _normal_variance(noise: SensorNoise, xyz_obs: FloatArray, n_obs: FloatArray) -> FloatArray:
+    """Variance of a measured point along the unit normal ``n_obs``: range noise along the
+    line of sight ``u`` and angle noise across it, ``s_r^2 (n.u)^2 + (s_a rho)^2 (1 - (n.u)^2)``."""
+    rho = np.linalg.norm(xyz_obs, axis=1)
+    cos2 = (np.einsum("ni,ni->n", xyz_obs, n_obs) / np.maximum(rho, 1e-300)) ** 2
+    return np.asarray(noise.range_sigma_m**2 * cos2 + (noise.angle_sigma_rad * rho) ** 2 * (1 - cos2))
+
+
+def _planar(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
+    """Surfels flat for their size and no thicker than a few sensor sigmas (eigenvalues ``w``
+    ascending; an edge or a corner is thick)."""
+    thin = w[:, 0]
+    return np.asarray(
+        (count >= MIN_SURFEL_POINTS) & (thin <= MAX_FLATNESS * w[:, 1]) & (thin <= MAX_THICKNESS_SIGMAS**2 * var)
+    )
+
+
 @dataclass(frozen=True)
-class _Surfaces:
-    """The local plane at every target point, expressed at the point's own observation time
-    (sensor frame) so it moves with the motion like the point: unit normal facing the sensor,
-    anchor (centroid of the neighbours) and whether the neighbourhood is planar."""
+class _Surfels:
+    """Every surfel at its own line's observation time (sensor frame): centroid, unit normal
+    facing the sensor, line, point count, whether it is planar, and the sensor variance of one
+    of its points along the normal."""
 
-    normal_obs: FloatArray
     anchor_obs: FloatArray
+    normal_obs: FloatArray
+    line: IntArray
+    count: FloatArray
     planar: NDArray[np.bool_]
+    var_m2: FloatArray
+    mapping: _Mapping  # the motion they were built with
 
 
-def _surfaces(points: DensePoints, mapping: _Mapping, neighbours: int) -> _Surfaces:
-    """Local planes of every frame's mapped points (principal axes of ``neighbours`` points)."""
-    mapped = mapping.apply(points.xyz_m, points.line)
-    normal_ref = np.zeros_like(mapped)
-    anchor_ref = mapped.copy()
-    planar = np.zeros(len(mapped), bool)
-    sensor_tau = points.frame_sensor_tau()
-    for f in range(points.n_frames):
-        idx = np.flatnonzero(points.frame == f)
-        if len(idx) < neighbours:
-            continue
-        P = mapped[idx]
-        _, nn = cKDTree(P).query(P, k=neighbours, workers=-1)
-        centroid = P[nn].mean(axis=1)
-        Q = P[nn] - centroid[:, None, :]
-        w, V = np.linalg.eigh(np.einsum("nki,nkj->nij", Q, Q))
-        n = V[:, :, 0]
-        # The sensor origin of this frame, mapped to T, is on the visible side of each surface.
-        sensor = _sensor_at_reference(mapping.x, float(sensor_tau[f]))
-        n *= np.sign(np.einsum("ni,ni->n", sensor - P, n))[:, None]
-        normal_ref[idx] = n
-        anchor_ref[idx] = centroid
-        planar[idx] = w[:, 0] <= MAX_CURVATURE * w.sum(axis=1)
-    # Back to each point's observation time: v_obs = R(tau) v_ref (about the centre for positions).
-    Rt = mapping.Rt[points.line]
-    normal_obs = np.einsum("nji,nj->ni", Rt, normal_ref)
-    anchor_obs = mapping.center + np.einsum("nji,nj->ni", Rt, anchor_ref - mapping.center)
-    return _Surfaces(np.asarray(normal_obs), np.asarray(anchor_obs), planar)
-
-
-def _sensor_at_reference(x: FloatArray, tau_s: float) -> FloatArray:
-    Rt = _rotations_T(x.astype(complex)[None, :], np.array([tau_s]))[0, 0].real
-    center = x[6:9]
-    return np.asarray(center + Rt @ (-center))
+def _surfels(data: DenseData, mapping: _Mapping, noise: SensorNoise) -> _Surfels:
+    """Voxel moments of the points mapped to ``T``; normals are the thinnest principal axes."""
+    m = len(data.cell_frame)
+    origin = mapping.center
+    mapped = mapping.apply(data.xyz_m, data.line) - origin
+    count = np.bincount(data.cell, minlength=m).astype(float)
+    safe = np.maximum(count, 1)
+    mean = np.stack([np.bincount(data.cell, mapped[:, i], minlength=m) for i in range(3)], axis=1) / safe[:, None]
+    cov = np.empty((m, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            s = np.bincount(data.cell, mapped[:, i] * mapped[:, j], minlength=m) / safe - mean[:, i] * mean[:, j]
+            cov[:, i, j] = cov[:, j, i] = s
+    # Each surfel takes the line nearest its points' mean time.
+    tau_mean = np.bincount(data.cell, data.tau_s[data.line], minlength=m) / safe
+    line = np.clip(np.searchsorted(data.tau_s, tau_mean), 0, len(data.tau_s) - 1)
+    lower = np.maximum(line - 1, 0)
+    line = np.where(np.abs(data.tau_s[lower] - tau_mean) < np.abs(data.tau_s[line] - tau_mean), lower, line)
+    # Back to the observation time: v_obs = R(tau) v_ref (about the centre for positions).
+    Rt = mapping.Rt[line]
+    anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
+    w, V = np.linalg.eigh(cov)
+    normal_obs = np.einsum("nji,nj->ni", Rt, V[:, :, 0])
+    # The sensor is at the origin of its own frame: normals face it.
+    normal_obs *= np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None]
+    var = _normal_variance(noise, anchor_obs, normal_obs)
+    planar = _planar(w, var, count)
+    planar &= data.interior
+    return _Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, mapping)
 
 
 @dataclass(frozen=True)
 class _Matches:
     src: IntArray  # source point of each residual (also its cluster in the sandwich covariance)
-    dst: IntArray
+    dst: IntArray  # surfel
 
 
 def _match(
-    points: DensePoints,
+    data: DenseData,
     mapping: _Mapping,
-    surf: _Surfaces,
-    pair_sources: dict[tuple[int, int], IntArray],
+    surf: _Surfels,
+    src: IntArray,
+    partner: IntArray,
     gate_m: float,
 ) -> _Matches:
-    mapped = mapping.apply(points.xyz_m, points.line)
-    normal_ref = mapping.rotate(surf.normal_obs, points.line)
-    planar = surf.planar
-    by_frame = [np.flatnonzero(points.frame == f) for f in range(points.n_frames)]
-    trees: dict[int, cKDTree] = {}
+    """Nearest planar surfel of the partner frame for each (source, partner) pair, if it lies
+    within ``gate_m`` and faces the same way as the source's own surfel."""
+    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    own = data.cell[src]
+    usable = surf.planar[own]
+    src, partner, own = src[usable], partner[usable], own[usable]
+    mapped = mapping.apply(data.xyz_m[src], data.line[src])
     src_all, dst_all = [], []
-    for (_, b), src in pair_sources.items():
-        if b not in trees:
-            trees[b] = cKDTree(mapped[by_frame[b]])
-        dist, nn = trees[b].query(mapped[src], k=1, distance_upper_bound=gate_m, workers=-1)
+    for b in range(data.n_frames):
+        sel = np.flatnonzero(partner == b)
+        cells = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        if len(sel) == 0 or len(cells) == 0:
+            continue
+        dist, nn = cKDTree(anchor_ref[cells]).query(mapped[sel], k=1, distance_upper_bound=gate_m, workers=-1)
         ok = np.isfinite(dist)
-        dst = by_frame[b][nn[ok]]
-        s = src[ok]
-        ok2 = planar[dst] & planar[s] & (np.einsum("ni,ni->n", normal_ref[s], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS)
-        src_all.append(s[ok2])
-        dst_all.append(dst[ok2])
+        dst = cells[nn[ok]]
+        s = sel[ok]
+        facing = np.einsum("ni,ni->n", normal_ref[own[s]], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS
+        src_all.append(src[s[facing]])
+        dst_all.append(dst[facing])
     src_c = np.concatenate(src_all) if src_all else np.zeros(0, np.int64)
     dst_c = np.concatenate(dst_all) if dst_all else np.zeros(0, np.int64)
     return _Matches(src_c, dst_c)
 
 
-def _residuals(points: DensePoints, mapping: _Mapping, surf: _Surfaces, m: _Matches) -> FloatArray:
-    p = mapping.apply(points.xyz_m[m.src], points.line[m.src])
-    q = mapping.apply(surf.anchor_obs[m.dst], points.line[m.dst])
-    n = mapping.rotate(surf.normal_obs[m.dst], points.line[m.dst])
-    return np.asarray(np.einsum("ni,ni->n", n, p - q))
+@dataclass(frozen=True)
+class _Linearized:
+    r: FloatArray  # point-to-plane residuals (m)
+    J: FloatArray  # their derivatives w.r.t. the free parameters
+    var: FloatArray  # model variance of each residual (m^2), before the common scale
 
 
-def _jacobian(points: DensePoints, mapping: _Mapping, surf: _Surfaces, m: _Matches) -> FloatArray:
-    dp = mapping.derivative(points.xyz_m[m.src], points.line[m.src])
-    dq = mapping.derivative(surf.anchor_obs[m.dst], points.line[m.dst])
-    n = mapping.rotate(surf.normal_obs[m.dst], points.line[m.dst])
-    return np.asarray(np.einsum("ni,nik->nk", n, dp - dq))
+def _residuals(data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches) -> tuple[FloatArray, FloatArray]:
+    """Point-to-plane residuals and the target normals at ``T``."""
+    p = mapping.apply(data.xyz_m[m.src], data.line[m.src])
+    q = mapping.apply(surf.anchor_obs[m.dst], surf.line[m.dst])
+    n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst])
+    return np.asarray(np.einsum("ni,ni->n", n, p - q)), n
 
 
-def _cauchy_weights(r: FloatArray, sigma: float) -> FloatArray:
-    return np.asarray(1.0 / (1.0 + (r / (CAUCHY_C * sigma)) ** 2))
+def _linearize(data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches, noise: SensorNoise) -> _Linearized:
+    xyz, line = data.xyz_m[m.src], data.line[m.src]
+    r, n = _residuals(data, mapping, surf, m)
+    J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
+    # The source's noise along the target's normal, seen from the source's own sensor.
+    n_src_obs = np.einsum("nji,nj->ni", mapping.Rt[line], n)
+    var = _normal_variance(noise, xyz, n_src_obs) + surf.var_m2[m.dst] / surf.count[m.dst]
+    return _Linearized(np.asarray(r), J, np.asarray(var))
+
+
+def _cauchy_weights(e: FloatArray, scale: float) -> FloatArray:
+    return np.asarray(1.0 / (1.0 + (e / (CAUCHY_C * scale)) ** 2))
 
 
 def _robust_sigma(r: FloatArray) -> float:
     return float(1.4826 * np.median(np.abs(r))) if len(r) else 0.0
 
 
+def _cauchy_cost(e: FloatArray, scale: float) -> float:
+    c2 = (CAUCHY_C * scale) ** 2
+    return float(0.5 * c2 * np.sum(np.log1p(e**2 / c2)))
+
+
+def _weights(lin: _Linearized) -> tuple[FloatArray, float]:
+    """Weights ``cauchy(e / s) / var`` of the normalized residuals ``e = r / sqrt(var)``, and ``s``."""
+    e = lin.r / np.sqrt(lin.var)
+    scale = max(_robust_sigma(e), 1e-12)
+    return _cauchy_weights(e, scale) / lin.var, scale
+
+
 @dataclass
 class _Problem:
-    points: DensePoints
+    data: DenseData
     free: tuple[int, ...]
     base: FloatArray
     config: DenseConfig
+    noise: SensorNoise
     gauge_point: FloatArray | None
-    noise_floor_m: float
 
     def full(self, z: FloatArray) -> FloatArray:
         x = self.base.copy()
@@ -296,106 +403,176 @@ class _Problem:
 
 
 def refine_dense(
-    points: DensePoints,
+    data: DenseData,
     x0: FloatArray,
     *,
     spin_only: bool = False,
     config: DenseConfig | None = None,
-    noise_floor_m: float = 0.01,
+    noise: SensorNoise | None = None,
     seed: int = 0,
+    converged: bool = False,
     on_iteration: Callable[[int, int], None] | None = None,
 ) -> DenseFit:
-    """Refine ``x0`` (a 9-vector at the reference time of ``points.tau_s``); see the module docstring.
+    """Refine ``x0`` (a 9-vector at the reference time of ``data.tau_s``); see the module docstring.
 
-    points: subsampled frames (:func:`subsample`). spin_only: fix the precession rate at 0
-    and pin the centre on the spin axis nearest the sources' centroid. noise_floor_m: the
-    correspondence gate never shrinks below 5 times this (about the range noise).
+    data: the frames (:func:`prepare`). spin_only: fix the precession rate at 0 and pin the
+    centre on the spin axis nearest the sources' centroid. noise: the sensor's noise model
+    (weights, planarity test, correspondence gate). converged: ``x0`` is already a solution
+    (of a superset of these frames, say): run the last stage only, from the tightest gate.
     on_iteration(step, max_steps): called after each step; it may raise to stop.
     """
     cfg = config or DenseConfig()
+    sensor = noise or SensorNoise()
     free = SPIN_ONLY_FREE if spin_only else ALL_FREE
     base = np.asarray(x0, dtype=float).copy()
+    rng = np.random.default_rng(seed)
+    coarse = _choose_sources(data, cfg.coarse_sources, rng)
+    fine = _choose_sources(data, cfg.sources, rng)
     gauge = None
     if spin_only:
         base[3:6] = 0.0
-        gauge = _Mapping(base, points.tau_s, free).apply(points.xyz_m, points.line)[points.sources].mean(axis=0)
-    problem = _Problem(points, free, base, cfg, gauge, noise_floor_m)
-    rng = np.random.default_rng(seed)
+        gauge = _Mapping(base, data.tau_s, free).apply(data.xyz_m[coarse], data.line[coarse]).mean(axis=0)
+    problem = _Problem(data, free, base, cfg, sensor, gauge)
     z = base[list(free)]
-    total = 2 * cfg.max_iterations
     step = 0
-    # 1. Near frames only: right correspondences even from the initializer's rough start.
-    near = _pair_sources(points, rng, window=cfg.near_window, per_source=1)
-    z, _, _, step = _iterate(problem, z, near, step=step, total=total, on_iteration=on_iteration)
-    # 2. Every frame with later ones: long baselines pin the rates down.
-    far = _pair_sources(points, rng, window=None, per_source=cfg.pairs_per_source)
-    z, matches, surf, step = _iterate(problem, z, far, step=step, total=total, on_iteration=on_iteration)
+    stages: list[tuple[tuple[IntArray, IntArray], int]] = [
+        # 1. Neighbouring frames only: right correspondences even from a rough start.
+        (_partners(data, coarse, rng, window=cfg.near_window, k=1), cfg.max_iterations),
+        # 2. Any frame: long baselines pin the rates down.
+        (_partners(data, coarse, rng, window=None, k=cfg.partners), cfg.max_iterations),
+        # 3. Many sources from the converged start: precision.
+        (_partners(data, fine, rng, window=None, k=cfg.partners), cfg.fine_iterations),
+    ]
+    surf: _Surfels | None = None
+    gate = max(data.extent_m / 20, 5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+    if converged:
+        stages, gate = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+    total = sum(iterations for _, iterations in stages)
+    for (src, partner), iterations in stages:
+        z, matches, surf, gate, step = _iterate(
+            problem, z, src, partner, surf, gate, iterations, step=step, total=total, on_iteration=on_iteration
+        )
+    assert surf is not None
     return _finish(problem, z, matches, surf, step)
 
 
-def _pair_sources(
-    points: DensePoints, rng: np.random.Generator, *, window: int | None, per_source: int
-) -> dict[tuple[int, int], IntArray]:
-    """For each frame pair ``(a, b > a)`` within ``window``, the sources of ``a`` to match in ``b``:
-    each source point goes to ``per_source`` of its frame's partners, chosen at random."""
-    out: dict[tuple[int, int], list[int]] = {}
-    F = points.n_frames
-    for a in range(F - 1):
-        partners = np.arange(a + 1, F if window is None else min(F, a + 1 + window))
-        src = points.sources[points.frame[points.sources] == a]
-        k = min(per_source, len(partners))
-        if len(partners) == 0 or len(src) == 0:
-            continue
-        choice = np.argsort(rng.random((len(src), len(partners))), axis=1)[:, :k]
-        for j, b in enumerate(partners):
-            sel = src[(choice == j).any(axis=1)]
-            if len(sel):
-                out.setdefault((a, int(b)), []).extend(sel.tolist())
-    return {key: np.asarray(v, dtype=np.int64) for key, v in out.items()}
+def _choose_sources(data: DenseData, n: int, rng: np.random.Generator) -> IntArray:
+    if n >= len(data.xyz_m):
+        return np.arange(len(data.xyz_m), dtype=np.int64)
+    return np.sort(rng.choice(len(data.xyz_m), n, replace=False)).astype(np.int64)
+
+
+def _partners(
+    data: DenseData, src: IntArray, rng: np.random.Generator, *, window: int | None, k: int
+) -> tuple[IntArray, IntArray]:
+    """``k`` random other frames for each source (within ``window`` frames of its own, if given):
+    the pairs as parallel arrays ``(source, partner frame)``."""
+    F = data.n_frames
+    reach = F - 1 if window is None else min(window, F - 1)
+    own = data.frame[src]
+    offsets = np.concatenate([-np.arange(reach, 0, -1), np.arange(1, reach + 1)])
+    out_src, out_partner = [], []
+    for _ in range(min(k, 2 * reach)):
+        b = own + offsets[rng.integers(0, len(offsets), len(src))]
+        # Offsets past either end fold back inside (a frame never pairs with itself).
+        b = np.where(b < 0, -b, b)
+        b = np.where(b >= F, 2 * (F - 1) - b, b)
+        ok = (b != own) & (b >= 0) & (b < F)
+        out_src.append(src[ok])
+        out_partner.append(b[ok])
+    return np.concatenate(out_src), np.concatenate(out_partner)
 
 
 def _iterate(
     problem: _Problem,
     z: FloatArray,
-    pair_sources: dict[tuple[int, int], IntArray],
+    src: IntArray,
+    partner: IntArray,
+    surf: _Surfels | None,
+    gate: float,
+    iterations: int,
     *,
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
-) -> tuple[FloatArray, _Matches, _Surfaces, int]:
-    cfg = problem.config
-    points = problem.points
-    floor = 5 * problem.noise_floor_m
-    gate = max(_extent(points) / 20, floor)
-    mapping = _Mapping(problem.full(z), points.tau_s, problem.free)
-    surf = _surfaces(points, mapping, cfg.neighbours)
-    matches = _match(points, mapping, surf, pair_sources, gate)
-    n_rot = sum(p < 6 for p in problem.free)
-    drift = 0.0
-    for _ in range(cfg.max_iterations):
-        r = _residuals(points, mapping, surf, matches)
-        J = _jacobian(points, mapping, surf, matches)
-        sigma = max(_robust_sigma(r), problem.noise_floor_m / 10)
-        w = _cauchy_weights(r, sigma)
-        rows, rhs = J * np.sqrt(w)[:, None], -r * np.sqrt(w)
-        rows, rhs = _with_gauge(problem, mapping, rows, rhs)
-        dz = np.linalg.lstsq(rows, rhs, rcond=None)[0]
+) -> tuple[FloatArray, _Matches, _Surfels, float, int]:
+    """Gauss-Newton steps on one set of (source, partner) pairs; ``gate`` is the largest
+    distance to a matched surfel's centroid, tightened as the frames come together."""
+    cfg, data, noise = problem.config, problem.data, problem.noise
+    floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
+    probe = src[:: max(1, len(src) // PROBE_POINTS)]
+    mapping = _Mapping(problem.full(z), data.tau_s, problem.free)
+    if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
+        surf = _surfels(data, mapping, noise)
+    matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+    lam = LM_START
+    for _ in range(iterations):
+        lin = _linearize(data, mapping, surf, matches, noise)
+        w, scale = _weights(lin)
+        sw = np.sqrt(w)
+        rows = lin.J * sw[:, None]
+        H, g = _with_gauge(problem, mapping.x, rows.T @ rows, -rows.T @ (lin.r * sw))
+        taken = _damped_step(problem, z, H, g, lam, lin, scale, matches, surf)
+        if taken is None:
+            break
+        dz, lam, mapping = taken
+        # A step far below the parameters' own uncertainty changes nothing that matters.
+        sd = scale * np.sqrt(np.diag(np.linalg.pinv(H, rcond=1e-12)))
+        moved = float(np.max(np.abs(dz) / np.maximum(sd, 1e-300)))
         z = z + dz
         step += 1
         if on_iteration is not None:
             on_iteration(step, total)
-        moved = float(np.max(np.abs(dz)))
-        drift += np.abs(dz[:n_rot]).max(initial=0.0)
-        mapping = _Mapping(problem.full(z), points.tau_s, problem.free)
-        # Tighten the gate as the frames come together, and refresh the normals once the rotation has moved.
-        gate = max(floor, min(gate, 4 * CAUCHY_C * sigma))
-        if drift > NORMAL_REFRESH_RAD:
-            surf = _surfaces(points, mapping, cfg.neighbours)
-            drift = 0.0
-        matches = _match(points, mapping, surf, pair_sources, gate)
         if moved < cfg.tolerance:
             break
-    return z, matches, surf, step
+        # Tighten the gate as the frames come together. Surfels move rigidly with their lines,
+        # so they are rebuilt only after large steps; correspondences once points have moved.
+        gate = max(floor, min(gate, 4 * CAUCHY_C * _robust_sigma(lin.r)))
+        if _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
+            surf = _surfels(data, mapping, noise)
+        if (
+            surf.mapping is mapping
+            or gate < 0.9 * matched_gate
+            or _shift(data, probe, matched_at, mapping) > REMATCH * data.surfel_m
+        ):
+            matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+
+    return z, matches, surf, gate, step
+
+
+def _damped_step(
+    problem: _Problem,
+    z: FloatArray,
+    H: FloatArray,
+    g: FloatArray,
+    lam: float,
+    lin: _Linearized,
+    scale: float,
+    matches: _Matches,
+    surf: _Surfels,
+) -> tuple[FloatArray, float, _Mapping] | None:
+    """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
+    last one) that lowers the Cauchy cost on these correspondences; None when none does."""
+    data = problem.data
+    gauge = _gauge_residual(problem, problem.full(z), H)
+    before = _cauchy_cost(lin.r / np.sqrt(lin.var), scale) + gauge
+    D = np.diag(np.diag(H))
+    for _ in range(LM_TRIES):
+        dz = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
+        x = problem.full(z + dz)
+        mapping = _Mapping(x, data.tau_s, problem.free)
+        r, _ = _residuals(data, mapping, surf, matches)
+        after = _cauchy_cost(r / np.sqrt(lin.var), scale) + _gauge_residual(problem, x, H)
+        if after <= before:
+            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
+        lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
+    return None
+
+
+def _shift(data: DenseData, probe: IntArray, before: _Mapping, after: _Mapping) -> float:
+    """Largest displacement of the probe points at ``T`` between two motions (m)."""
+    xyz, line = data.xyz_m[probe], data.line[probe]
+    return float(np.max(np.linalg.norm(after.apply(xyz, line) - before.apply(xyz, line), axis=1), initial=0.0))
 
 
 def _gauge_row(problem: _Problem, x: FloatArray) -> FloatArray | None:
@@ -407,41 +584,42 @@ def _gauge_row(problem: _Problem, x: FloatArray) -> FloatArray | None:
     return row
 
 
-def _with_gauge(
-    problem: _Problem, mapping: _Mapping, rows: FloatArray, rhs: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Spin-only: one heavy row pinning the centre to the axis point nearest the gauge point."""
-    row = _gauge_row(problem, mapping.x)
+def _with_gauge(problem: _Problem, x: FloatArray, H: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Spin-only: a stiff penalty pinning the centre to the axis point nearest the gauge point."""
+    row = _gauge_row(problem, x)
     if row is None or problem.gauge_point is None:
-        return rows, rhs
-    x = mapping.x
-    weight = 1e3 * max(float(np.sqrt(np.mean(rows**2))), 1.0)
-    g_val = -float(row[-3:] @ (x[6:9] - problem.gauge_point)) * weight
-    return np.vstack([rows, row * weight]), np.append(rhs, g_val)
+        return H, g
+    weight = GAUGE_STIFFNESS * np.trace(H)
+    value = float(row[-3:] @ (x[6:9] - problem.gauge_point))
+    return H + weight * np.outer(row, row), g - weight * value * row
 
 
-def _extent(points: DensePoints) -> float:
-    return float(np.linalg.norm(np.ptp(points.xyz_m, axis=0)))
+def _gauge_residual(problem: _Problem, x: FloatArray, H: FloatArray) -> float:
+    """The penalty's share of the cost (see :func:`_with_gauge`)."""
+    row = _gauge_row(problem, x)
+    if row is None or problem.gauge_point is None:
+        return 0.0
+    value = float(row[-3:] @ (x[6:9] - problem.gauge_point))
+    return 0.5 * GAUGE_STIFFNESS * float(np.trace(H)) * value**2
 
 
-def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfaces, steps: int) -> DenseFit:
+def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfels, steps: int) -> DenseFit:
     """Covariance and residual statistics at ``z`` with the last step's correspondences."""
-    points = problem.points
+    data = problem.data
     x = problem.full(z)
-    mapping = _Mapping(x, points.tau_s, problem.free)
-    r = _residuals(points, mapping, surf, m)
-    J = _jacobian(points, mapping, surf, m)
-    sigma = max(_robust_sigma(r), 1e-15)
-    w = _cauchy_weights(r, sigma)
-    cov_free = _sandwich(J, r, w, m.src, _gauge_row(problem, x))
+    mapping = _Mapping(x, data.tau_s, problem.free)
+    lin = _linearize(data, mapping, surf, m, problem.noise)
+    w, scale = _weights(lin)
+    cov_free = _sandwich(lin.J, lin.r, w, m.src, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
-    inlier = np.abs(r) <= 3 * sigma
-    frame_sq = np.zeros(points.n_frames)
-    frame_n = np.zeros(points.n_frames)
-    for fr in (points.frame[m.src], points.frame[m.dst]):
-        np.add.at(frame_sq, fr[inlier], r[inlier] ** 2)
+    inlier = np.abs(lin.r) <= 3 * scale * np.sqrt(lin.var)
+    r_in = lin.r[inlier]
+    frame_sq = np.zeros(data.n_frames)
+    frame_n = np.zeros(data.n_frames)
+    for fr in (data.frame[m.src], data.cell_frame[m.dst]):
+        np.add.at(frame_sq, fr[inlier], r_in**2)
         np.add.at(frame_n, fr[inlier], 1)
     frame_rms = np.sqrt(frame_sq / np.maximum(frame_n, 1))
     frame_rms[frame_n == 0] = np.nan
@@ -449,9 +627,9 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfaces, step
         x=canonical_params(x),
         cov=canonical_cov(x, cov9),
         free=problem.free,
-        rms_m=float(np.sqrt(np.mean(r[inlier] ** 2))) if inlier.any() else float("nan"),
+        rms_m=float(np.sqrt(np.mean(r_in**2))) if len(r_in) else float("nan"),
         frame_rms_m=frame_rms,
-        residuals=len(r),
+        residuals=len(lin.r),
         sources=len(np.unique(m.src)),
         iterations=steps,
     )
@@ -470,6 +648,6 @@ def _sandwich(
     B = G.T @ G
     if gauge_row is not None:
         # The gauge row fixes the centre's slide along the spin axis (see _with_gauge).
-        H = H + np.outer(gauge_row, gauge_row) * 1e6 * np.trace(H)
+        H = H + np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(H)
     Hinv = np.linalg.pinv(H, rcond=1e-12)
     return np.asarray(Hinv @ B @ Hinv, dtype=float)

@@ -25,13 +25,13 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
-from .dense import DenseFit, DensePoints, refine_dense, subsample
+from .dense import DenseData, DenseFit, prepare, refine_dense
 from .errors import InputError
 from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
 from .frames import Frames
 from .initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
 from .motion import rotate
-from .registration import PairTransforms, consistent_pairs, extent_m, register_consecutive, voxel_size_m
+from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
 from .result import MotionResult
 from .sensor import SensorNoise
 from .uncertainty import Similarity, similarity
@@ -42,8 +42,7 @@ Progress = Callable[[str, float], None]
 # Registration works on a thinned copy of each frame: this many points at most.
 REGISTRATION_POINTS = 60_000
 RETIME_PASSES = 2
-TARGET_VOXEL_FRACTION = 1 / 130
-SOURCE_VOXEL_FRACTION = 1 / 80
+SURFEL_FRACTION = 1 / 100
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
@@ -92,38 +91,31 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     T = float(cloud.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
     n_frames = frames.n_frames
     n2 = validation_frame_count(n_frames, opts.validation_frames)
-    # 1. Thin every frame for registration and sampling (times kept per point).
+    # 1. Thin every frame for registration; the dense fit uses every point.
     thin = _thin(frames, opts.seed)
-    xyz, tau, frame = cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin]
-    per_frame = [xyz[frame == f] for f in range(n_frames)]
-    extent, voxel = extent_m(per_frame), voxel_size_m(per_frame)
-    # The dense fit samples the full cloud: thinning first would leave holes in the local planes.
-    points = subsample(
-        cloud.xyz_m,
-        cloud.t_s - T,
-        frames.frame,
-        target_voxel_m=opts.dense.target_voxel_m or extent * TARGET_VOXEL_FRACTION,
-        source_voxel_m=opts.dense.source_voxel_m or extent * SOURCE_VOXEL_FRACTION,
-        seed=opts.seed,
-    )
+    reg = _RegistrationPoints(cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin])
+    extent = extent_m(reg.per_frame(n_frames))
+    data = prepare(cloud.xyz_m, cloud.t_s - T, frames.frame, surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION)
     noise = opts.sensor or SensorNoise()
     warnings: list[str] = []
     # 2-3. Register, initialize and refine on all frames.
     progress("registering", 0.0)
-    global_pairs = _register(xyz, tau, frame, n_frames, voxel, opts.seed, None)
-    main = _solve(points, global_pairs, n_frames, opts, noise, progress, (0.1, 0.65), warnings)
+    voxel = max(extent * VOXEL_FRACTION, 1e-3)
+    global_pairs = register_consecutive(reg.per_frame(n_frames), voxel_m=voxel, seed=opts.seed)
+    solver = _Solver(data, reg, global_pairs, voxel, opts, noise, progress)
+    main = solver.solve(n_frames, (0.1, 0.65), warnings, spin_only=opts.model == "spin-only")
     fit = main.fit
     # 4. Model choice.
-    if opts.model == "spin-only" or (opts.model == "auto" and _precession_insignificant(fit, opts, warnings)):
+    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
         progress("refining", 0.66)
         fit = refine_dense(
-            points, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise_floor_m=_floor(noise)
+            data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=noise, seed=opts.seed
         )
     # 5. Validate with the first n2 frames, from their own registrations.
     check: Similarity | None = None
     if n2 < n_frames:
         progress("validating", 0.7)
-        check = _validate(points, global_pairs, n2, fit, opts, noise, progress, warnings)
+        check = _validate(solver, n2, fit, opts)
     else:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:
@@ -133,6 +125,22 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
         )
     progress("estimated", 1.0)
     return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+
+
+@dataclass(frozen=True)
+class _RegistrationPoints:
+    """The thinned cloud registration works on: positions, offsets from ``T``, frames."""
+
+    xyz_m: FloatArray
+    tau_s: FloatArray
+    frame: NDArray[np.int64]
+
+    def first_frames(self, n: int) -> _RegistrationPoints:
+        keep = self.frame < n
+        return _RegistrationPoints(self.xyz_m[keep], self.tau_s[keep], self.frame[keep])
+
+    def per_frame(self, n: int) -> list[FloatArray]:
+        return [self.xyz_m[self.frame == f] for f in range(n)]
 
 
 def _thin(frames: Frames, seed: int) -> NDArray[np.int64]:
@@ -149,30 +157,8 @@ def _thin(frames: Frames, seed: int) -> NDArray[np.int64]:
     return np.sort(np.concatenate(keep))
 
 
-def _floor(noise: SensorNoise) -> float:
-    return float(noise.range_sigma_m)
-
-
 def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> FloatArray:
     return np.asarray(np.bincount(frame, weights=tau, minlength=n_frames) / np.bincount(frame, minlength=n_frames))
-
-
-def _register(
-    xyz: FloatArray,
-    tau: FloatArray,
-    frame: NDArray[np.int64],
-    n_frames: int,
-    voxel_m: float,
-    seed: int,
-    previous: PairTransforms | None,
-) -> PairTransforms:
-    """Register consecutive frames. Given a previous registration, each frame is first
-    re-timed to its mean time with the angular velocity that registration implies around it
-    (removing the in-frame smear), and ICP starts from the previous transforms."""
-    if previous is not None:
-        xyz = _retimed(xyz, tau, frame, _frame_taus(tau, frame, n_frames), previous)
-    per_frame = [xyz[frame == f] for f in range(n_frames)]
-    return register_consecutive(per_frame, voxel_m=voxel_m, initial=previous, seed=seed)
 
 
 def _retimed(
@@ -214,55 +200,50 @@ def _initial(pairs: PairTransforms, mid: FloatArray, n_frames: int, warnings: li
     return guess, len(k)
 
 
-def _solve(
-    points: DensePoints,
-    global_pairs: PairTransforms,
-    n_frames: int,
-    opts: EstimateOptions,
-    noise: SensorNoise,
-    progress: Progress,
-    span: tuple[float, float],
-    warnings: list[str],
-) -> _Solve:
-    """Initialize from the registrations of the first ``n_frames`` frames, then refine."""
-    lo, hi = span
-    sel = points.frame < n_frames
-    xyz, line, frame = points.xyz_m[sel], points.line[sel], points.frame[sel]
-    tau = points.tau_s[line]
-    mid = _frame_taus(tau, frame, n_frames)
-    pairs = _slice_pairs(global_pairs, n_frames - 1)
-    # Re-timed registration passes: the in-frame smear no longer biases the rotations.
-    voxel = voxel_size_m([xyz[frame == f] for f in range(n_frames)])
-    for p in range(RETIME_PASSES):
-        progress("registering", lo + 0.1 * (hi - lo) * (p + 1) / RETIME_PASSES)
-        pairs = _register(xyz, tau, frame, n_frames, voxel, opts.seed, pairs)
-    progress("initializing", lo + 0.1 * (hi - lo))
-    guess, used = _initial(pairs, mid, n_frames, warnings)
-    progress("refining", lo + 0.2 * (hi - lo))
-    sub = _subset(points, n_frames)
+@dataclass(frozen=True)
+class _Solver:
+    """Initialize and refine from the first ``n`` frames (all of them, or the validation's)."""
 
-    def on_step(step: int, total: int) -> None:
-        progress("refining", lo + (0.2 + 0.8 * step / total) * (hi - lo))
+    data: DenseData
+    reg: _RegistrationPoints
+    global_pairs: PairTransforms
+    voxel_m: float
+    opts: EstimateOptions
+    noise: SensorNoise
+    progress: Progress
 
-    fit = refine_dense(
-        sub, guess.x, config=opts.dense, noise_floor_m=_floor(noise), seed=opts.seed, on_iteration=on_step
-    )
-    return _Solve(fit, guess, used)
+    def solve(self, n: int, span: tuple[float, float], warnings: list[str], *, spin_only: bool) -> _Solve:
+        lo, hi = span
+        reg = self.reg.first_frames(n)
+        mid = _frame_taus(reg.tau_s, reg.frame, n)
+        pairs = _slice_pairs(self.global_pairs, n - 1)
+        # Re-timed registration passes: the in-frame smear no longer biases the rotations.
+        for p in range(RETIME_PASSES):
+            self.progress("registering", lo + 0.1 * (hi - lo) * (p + 1) / RETIME_PASSES)
+            xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs)
+            per_frame = [xyz[reg.frame == f] for f in range(n)]
+            pairs = register_consecutive(per_frame, voxel_m=self.voxel_m, initial=pairs, seed=self.opts.seed)
+        self.progress("initializing", lo + 0.1 * (hi - lo))
+        guess, used = _initial(pairs, mid, n, warnings)
+        self.progress("refining", lo + 0.2 * (hi - lo))
+
+        def on_step(step: int, total: int) -> None:
+            self.progress("refining", lo + (0.2 + 0.8 * step / total) * (hi - lo))
+
+        fit = refine_dense(
+            self.data.first_frames(n),
+            guess.x_spin_only if spin_only else guess.x,
+            spin_only=spin_only,
+            config=self.opts.dense,
+            noise=self.noise,
+            seed=self.opts.seed,
+            on_iteration=on_step,
+        )
+        return _Solve(fit, guess, used)
 
 
 def _slice_pairs(p: PairTransforms, n: int) -> PairTransforms:
     return PairTransforms(p.R[:n], p.t[:n], p.fitness[:n], p.rmse_m[:n])
-
-
-def _subset(points: DensePoints, n_frames: int) -> DensePoints:
-    if n_frames >= points.n_frames:
-        return points
-    keep = points.frame < n_frames
-    new_index = np.cumsum(keep) - 1
-    sources = new_index[points.sources[keep[points.sources]]]
-    return DensePoints(
-        points.xyz_m[keep], points.frame[keep], points.line[keep], points.tau_s, sources.astype(np.int64), n_frames
-    )
 
 
 def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: list[str]) -> bool:
@@ -278,30 +259,24 @@ def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: li
     return True
 
 
-def _validate(
-    points: DensePoints,
-    global_pairs: PairTransforms,
-    n2: int,
-    fit: DenseFit,
-    opts: EstimateOptions,
-    noise: SensorNoise,
-    progress: Progress,
-    warnings: list[str],
-) -> Similarity:
-    try:
-        second = _solve(points, global_pairs, n2, opts, noise, progress, (0.7, 0.98), [])
-    except FramesUnusableError as exc:
-        warnings.append(f"second solve with {n2} frames could not start: {exc}")
-        return Similarity(False, float("inf"), float("nan"), "skipped")
-    sub = second.fit
-    if fit.spin_only:
-        sub = refine_dense(
-            _subset(points, n2),
-            second.initial.x_spin_only,
-            spin_only=True,
-            config=opts.dense,
-            noise_floor_m=_floor(noise),
-        )
+def _validate(solver: _Solver, n2: int, fit: DenseFit, opts: EstimateOptions) -> Similarity:
+    """Refine again on the first ``n2`` frames only, from the motion found on all of them: do
+    those frames alone support it? (A start from their own registrations would repeat the
+    initializer's work on a shorter, weaker baseline; that start is tested by the main solve.)"""
+
+    def on_step(step: int, total: int) -> None:
+        solver.progress("validating", 0.7 + 0.28 * step / total)
+
+    sub = refine_dense(
+        solver.data.first_frames(n2),
+        fit.x,
+        spin_only=fit.spin_only,
+        config=opts.dense,
+        noise=solver.noise,
+        seed=opts.seed + 1,
+        converged=True,
+        on_iteration=on_step,
+    )
     noise_scale = 1.0 if fit.rms_m > NOISE_FREE_RMS_M else 0.0
     return similarity(fit.x, sub.x, sub.cov, free=fit.free, noise_scale=noise_scale, alpha=opts.significance)
 
