@@ -20,6 +20,7 @@ from tumblescan import (
     Scanner,
     Scene,
     TimedCloud,
+    assemble_frames,
     estimate_from_frames,
     random_motion,
     read_frames,
@@ -28,6 +29,7 @@ from tumblescan import (
     simulate_frames,
     write_ply,
 )
+from tumblescan.dense import prepare
 from tumblescan.errors import InputError
 
 from .live import serve
@@ -214,3 +216,48 @@ def test_bad_frame_uploads_are_422_naming_the_field(http: httpx.Client, frames_p
         "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"frame_period_s": -1})}
     )
     assert r.status_code == 422 and "frame_period_s" in r.text
+    # Dense-fit settings are checked at the boundary too, naming the nested field.
+    r = http.post(
+        "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"dense": {"sources": 5}})}
+    )
+    assert r.status_code == 422 and "sources" in r.text, r.text
+
+
+def test_dense_data_keeps_the_first_frames_consistent(simulated: tuple[Motion, FrameCloud]) -> None:
+    _, sim = simulated
+    data = prepare(sim.xyz_m, sim.t_s - sim.t_s.min(), sim.frame, surfel_m=0.2)
+    first = data.first_frames(5)
+    assert first.n_frames == 5 and np.array_equal(first.xyz_m, sim.xyz_m[sim.frame < 5])
+    # Every point still belongs to a surfel of its own frame.
+    assert np.array_equal(first.cell_frame[first.cell], first.frame)
+    assert len(first.interior) == len(first.cell_frame) == first.cell.max() + 1
+
+
+def test_surfel_cells_do_not_depend_on_the_range_noise() -> None:
+    # A wall seen face-on at 50 m, twice: without noise and with 5 cm range noise. Cells are cut in
+    # the sensor's view, so each point lands in the same surfel either way (a 3D voxel grid would
+    # move points across the faces it shares with the wall).
+    rng = np.random.default_rng(0)
+    az, el = np.meshgrid(np.linspace(-0.05, 0.05, 200), np.linspace(-0.05, 0.05, 200))
+    d = np.stack([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)], axis=-1).reshape(-1, 3)
+    clean = d * (50.0 / d[:, 2])[:, None]
+    noisy = clean + d * rng.normal(0, 0.05, len(d))[:, None]
+    t = np.repeat(np.arange(200) * 1e-3, 200)
+    frame = np.zeros(len(d), np.int64)
+    a = prepare(clean, t, frame, surfel_m=0.3)
+    b = prepare(noisy, t, frame, surfel_m=0.3)
+    assert np.array_equal(a.cell, b.cell)
+
+
+def test_pure_spin_from_frames_is_reported_spin_only() -> None:
+    # A target spinning about one fixed axis, seen as dense frames: the Wald test finds no
+    # precession, and the spin-only refit recovers the axis and rate within their uncertainty.
+    motion = Motion.from_degrees(spin_axis=(0.3, 0.8, 0.5), spin_rate_deg_s=20.0, center_m=(0.0, 0.0, 50.0))
+    sim = simulate_frames(motion, Scene(scanner=SCANNER), seed=4)
+    r = estimate_from_frames(assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line})))
+    assert r.model == "spin-only", r.warnings
+    assert any("no significant precession" in w for w in r.warnings)
+    truth = motion.canonical().at_reference(r.reference_time_s)
+    assert _angle_deg(r.spin.axis, truth.spin_axis) < 4 * r.uncertainty.spin_axis_deg < 0.5
+    assert abs(r.spin.rate_deg_s - 20.0) < 4 * r.uncertainty.spin_rate_deg_s < 0.1
+    assert r.validation.passed

@@ -67,7 +67,8 @@ LM_FIRST_TIGHT = 1e-4
 LM_TIGHTEN = 10.0
 LM_RELAX = 3.0
 LM_TRIES = 10
-# Spin-only: the centre's slide along the spin axis is pinned by a penalty this stiff (x trace H).
+# Spin-only covariance: the centre's unobservable slide along the spin axis is removed by a
+# penalty this stiff (x trace H) before inverting.
 GAUGE_STIFFNESS = 1e6
 
 
@@ -77,8 +78,8 @@ class DenseConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     surfel_m: float | None = Field(None, gt=0, description="surfel size; default (estimate_from_frames): extent / 100")
-    coarse_sources: int = Field(20_000, ge=100, description="source points of the first two stages")
-    sources: int = Field(200_000, ge=100, description="source points of the last stage")
+    coarse_sources: int = Field(20_000, ge=100, le=10_000_000, description="source points of the first two stages")
+    sources: int = Field(200_000, ge=100, le=100_000_000, description="source points of the last stage")
     partners: int = Field(2, ge=1, le=100, description="other frames each source point is matched in")
     near_window: int = Field(2, ge=1, le=100, description="frames either side matched in the first stage")
     max_iterations: int = Field(15, ge=1, le=1000, description="Gauss-Newton steps in each of the first two stages")
@@ -411,6 +412,7 @@ def refine_dense(
     noise: SensorNoise | None = None,
     seed: int = 0,
     converged: bool = False,
+    gauge_point: FloatArray | None = None,
     on_iteration: Callable[[int, int], None] | None = None,
 ) -> DenseFit:
     """Refine ``x0`` (a 9-vector at the reference time of ``data.tau_s``); see the module docstring.
@@ -419,6 +421,8 @@ def refine_dense(
     centre on the spin axis nearest the sources' centroid. noise: the sensor's noise model
     (weights, planarity test, correspondence gate). converged: ``x0`` is already a solution
     (of a superset of these frames, say): run the last stage only, from the tightest gate.
+    gauge_point: spin-only, the point whose nearest axis point is reported as the centre
+    (default: the sources' centroid at ``T``); give the same one to compare two fits.
     on_iteration(step, max_steps): called after each step; it may raise to stop.
     """
     cfg = config or DenseConfig()
@@ -431,8 +435,13 @@ def refine_dense(
     gauge = None
     if spin_only:
         base[3:6] = 0.0
-        gauge = _Mapping(base, data.tau_s, free).apply(data.xyz_m[coarse], data.line[coarse]).mean(axis=0)
+        gauge = (
+            np.asarray(gauge_point, dtype=float)
+            if gauge_point is not None
+            else _Mapping(base, data.tau_s, free).apply(data.xyz_m[coarse], data.line[coarse]).mean(axis=0)
+        )
     problem = _Problem(data, free, base, cfg, sensor, gauge)
+    base[:] = _on_gauge(problem, base)
     z = base[list(free)]
     step = 0
     stages: list[tuple[tuple[IntArray, IntArray], int]] = [
@@ -511,7 +520,7 @@ def _iterate(
         w, scale = _weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
-        H, g = _with_gauge(problem, mapping.x, rows.T @ rows, -rows.T @ (lin.r * sw))
+        H, g = rows.T @ rows, -rows.T @ (lin.r * sw)
         taken = _damped_step(problem, z, H, g, lam, lin, scale, matches, surf)
         if taken is None:
             break
@@ -554,15 +563,15 @@ def _damped_step(
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
     last one) that lowers the Cauchy cost on these correspondences; None when none does."""
     data = problem.data
-    gauge = _gauge_residual(problem, problem.full(z), H)
-    before = _cauchy_cost(lin.r / np.sqrt(lin.var), scale) + gauge
+    before = _cauchy_cost(lin.r / np.sqrt(lin.var), scale)
     D = np.diag(np.diag(H))
     for _ in range(LM_TRIES):
-        dz = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-        x = problem.full(z + dz)
+        step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
+        x = _on_gauge(problem, problem.full(z + step))
+        dz = x[list(problem.free)] - z
         mapping = _Mapping(x, data.tau_s, problem.free)
         r, _ = _residuals(data, mapping, surf, matches)
-        after = _cauchy_cost(r / np.sqrt(lin.var), scale) + _gauge_residual(problem, x, H)
+        after = _cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
             return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
@@ -584,23 +593,15 @@ def _gauge_row(problem: _Problem, x: FloatArray) -> FloatArray | None:
     return row
 
 
-def _with_gauge(problem: _Problem, x: FloatArray, H: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Spin-only: a stiff penalty pinning the centre to the axis point nearest the gauge point."""
-    row = _gauge_row(problem, x)
-    if row is None or problem.gauge_point is None:
-        return H, g
-    weight = GAUGE_STIFFNESS * np.trace(H)
-    value = float(row[-3:] @ (x[6:9] - problem.gauge_point))
-    return H + weight * np.outer(row, row), g - weight * value * row
-
-
-def _gauge_residual(problem: _Problem, x: FloatArray, H: FloatArray) -> float:
-    """The penalty's share of the cost (see :func:`_with_gauge`)."""
-    row = _gauge_row(problem, x)
-    if row is None or problem.gauge_point is None:
-        return 0.0
-    value = float(row[-3:] @ (x[6:9] - problem.gauge_point))
-    return 0.5 * GAUGE_STIFFNESS * float(np.trace(H)) * value**2
+def _on_gauge(problem: _Problem, x: FloatArray) -> FloatArray:
+    """Spin-only: the centre slid along the spin axis to the point nearest the gauge point.
+    Any point of the axis gives the same motion, so the cost does not change."""
+    if problem.gauge_point is None:
+        return x
+    l_s = axis_from_angles(x[0], x[1])
+    out = x.copy()
+    out[6:9] -= l_s * float(l_s @ (x[6:9] - problem.gauge_point))
+    return out
 
 
 def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfels, steps: int) -> DenseFit:
@@ -647,7 +648,7 @@ def _sandwich(
     np.add.at(G, inv, g)
     B = G.T @ G
     if gauge_row is not None:
-        # The gauge row fixes the centre's slide along the spin axis (see _with_gauge).
+        # The centre's slide along the spin axis is fixed (see _on_gauge): no variance there.
         H = H + np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(H)
     Hinv = np.linalg.pinv(H, rcond=1e-12)
     return np.asarray(Hinv @ B @ Hinv, dtype=float)

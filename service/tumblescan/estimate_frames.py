@@ -6,11 +6,10 @@ Recipe:
 2. Initialize by the closed-form cone (method.md section 5) on those transforms; re-time each
    frame to its mean time with that motion, register again by ICP from the predicted
    transforms, and fit the cone once more.
-3. Refine all 9 parameters by the dense continuous-time fit (:mod:`tumblescan.dense`).
+3. Refine all 9 parameters by the dense continuous-time fit on every point (:mod:`tumblescan.dense`).
 4. Choose the model: keep spin-precession unless the precession rate is not significantly
    different from 0 (Wald test at ``significance``); then refit spin-only.
-5. Validate (paper eq. 11): solve again from the first frames only, from their own
-   registrations, and compare.
+5. Validate (paper eq. 11): polish the motion on the first frames only and compare.
 """
 
 from __future__ import annotations
@@ -94,16 +93,15 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     # 1. Thin every frame for registration; the dense fit uses every point.
     thin = _thin(frames, opts.seed)
     reg = _RegistrationPoints(cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin])
-    extent = extent_m(reg.per_frame(n_frames))
+    extent = extent_m(reg.split(reg.xyz_m, n_frames))
     data = prepare(cloud.xyz_m, cloud.t_s - T, frames.frame, surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION)
     noise = opts.sensor or SensorNoise()
     warnings: list[str] = []
     # 2-3. Register, initialize and refine on all frames.
     progress("registering", 0.0)
     voxel = max(extent * VOXEL_FRACTION, 1e-3)
-    global_pairs = register_consecutive(reg.per_frame(n_frames), voxel_m=voxel, seed=opts.seed)
-    solver = _Solver(data, reg, global_pairs, voxel, opts, noise, progress)
-    main = solver.solve(n_frames, (0.1, 0.65), warnings, spin_only=opts.model == "spin-only")
+    global_pairs = register_consecutive(reg.split(reg.xyz_m, n_frames), voxel_m=voxel, seed=opts.seed)
+    main = _solve(data, reg, global_pairs, voxel, opts, noise, progress, warnings, spin_only=opts.model == "spin-only")
     fit = main.fit
     # 4. Model choice.
     if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
@@ -111,11 +109,11 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
         fit = refine_dense(
             data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=noise, seed=opts.seed
         )
-    # 5. Validate with the first n2 frames, from their own registrations.
+    # 5. Validate: do the first n2 frames alone support the motion?
     check: Similarity | None = None
     if n2 < n_frames:
         progress("validating", 0.7)
-        check = _validate(solver, n2, fit, opts)
+        check = _validate(data, n2, fit, opts, noise, progress)
     else:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:
@@ -135,12 +133,9 @@ class _RegistrationPoints:
     tau_s: FloatArray
     frame: NDArray[np.int64]
 
-    def first_frames(self, n: int) -> _RegistrationPoints:
-        keep = self.frame < n
-        return _RegistrationPoints(self.xyz_m[keep], self.tau_s[keep], self.frame[keep])
-
-    def per_frame(self, n: int) -> list[FloatArray]:
-        return [self.xyz_m[self.frame == f] for f in range(n)]
+    def split(self, xyz_m: FloatArray, n: int) -> list[FloatArray]:
+        """``xyz_m`` (one row per point here) split into the ``n`` frames."""
+        return [xyz_m[self.frame == f] for f in range(n)]
 
 
 def _thin(frames: Frames, seed: int) -> NDArray[np.int64]:
@@ -200,50 +195,43 @@ def _initial(pairs: PairTransforms, mid: FloatArray, n_frames: int, warnings: li
     return guess, len(k)
 
 
-@dataclass(frozen=True)
-class _Solver:
-    """Initialize and refine from the first ``n`` frames (all of them, or the validation's)."""
+def _solve(
+    data: DenseData,
+    reg: _RegistrationPoints,
+    pairs: PairTransforms,
+    voxel_m: float,
+    opts: EstimateOptions,
+    noise: SensorNoise,
+    progress: Progress,
+    warnings: list[str],
+    *,
+    spin_only: bool,
+) -> _Solve:
+    """Re-time and register again, initialize on the transforms, refine on every point."""
+    n = data.n_frames
+    mid = _frame_taus(reg.tau_s, reg.frame, n)
+    # Re-timed registration passes: the in-frame smear no longer biases the rotations.
+    for p in range(RETIME_PASSES):
+        progress("registering", 0.1 * (p + 1) / RETIME_PASSES)
+        xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs)
+        pairs = register_consecutive(reg.split(xyz, n), voxel_m=voxel_m, initial=pairs, seed=opts.seed)
+    progress("initializing", 0.1)
+    guess, used = _initial(pairs, mid, n, warnings)
+    progress("refining", 0.15)
 
-    data: DenseData
-    reg: _RegistrationPoints
-    global_pairs: PairTransforms
-    voxel_m: float
-    opts: EstimateOptions
-    noise: SensorNoise
-    progress: Progress
+    def on_step(step: int, total: int) -> None:
+        progress("refining", 0.15 + 0.5 * step / total)
 
-    def solve(self, n: int, span: tuple[float, float], warnings: list[str], *, spin_only: bool) -> _Solve:
-        lo, hi = span
-        reg = self.reg.first_frames(n)
-        mid = _frame_taus(reg.tau_s, reg.frame, n)
-        pairs = _slice_pairs(self.global_pairs, n - 1)
-        # Re-timed registration passes: the in-frame smear no longer biases the rotations.
-        for p in range(RETIME_PASSES):
-            self.progress("registering", lo + 0.1 * (hi - lo) * (p + 1) / RETIME_PASSES)
-            xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs)
-            per_frame = [xyz[reg.frame == f] for f in range(n)]
-            pairs = register_consecutive(per_frame, voxel_m=self.voxel_m, initial=pairs, seed=self.opts.seed)
-        self.progress("initializing", lo + 0.1 * (hi - lo))
-        guess, used = _initial(pairs, mid, n, warnings)
-        self.progress("refining", lo + 0.2 * (hi - lo))
-
-        def on_step(step: int, total: int) -> None:
-            self.progress("refining", lo + (0.2 + 0.8 * step / total) * (hi - lo))
-
-        fit = refine_dense(
-            self.data.first_frames(n),
-            guess.x_spin_only if spin_only else guess.x,
-            spin_only=spin_only,
-            config=self.opts.dense,
-            noise=self.noise,
-            seed=self.opts.seed,
-            on_iteration=on_step,
-        )
-        return _Solve(fit, guess, used)
-
-
-def _slice_pairs(p: PairTransforms, n: int) -> PairTransforms:
-    return PairTransforms(p.R[:n], p.t[:n], p.fitness[:n], p.rmse_m[:n])
+    fit = refine_dense(
+        data,
+        guess.x_spin_only if spin_only else guess.x,
+        spin_only=spin_only,
+        config=opts.dense,
+        noise=noise,
+        seed=opts.seed,
+        on_iteration=on_step,
+    )
+    return _Solve(fit, guess, used)
 
 
 def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: list[str]) -> bool:
@@ -259,22 +247,25 @@ def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: li
     return True
 
 
-def _validate(solver: _Solver, n2: int, fit: DenseFit, opts: EstimateOptions) -> Similarity:
+def _validate(
+    data: DenseData, n2: int, fit: DenseFit, opts: EstimateOptions, noise: SensorNoise, progress: Progress
+) -> Similarity:
     """Refine again on the first ``n2`` frames only, from the motion found on all of them: do
     those frames alone support it? (A start from their own registrations would repeat the
     initializer's work on a shorter, weaker baseline; that start is tested by the main solve.)"""
 
     def on_step(step: int, total: int) -> None:
-        solver.progress("validating", 0.7 + 0.28 * step / total)
+        progress("validating", 0.7 + 0.28 * step / total)
 
     sub = refine_dense(
-        solver.data.first_frames(n2),
+        data.first_frames(n2),
         fit.x,
         spin_only=fit.spin_only,
         config=opts.dense,
-        noise=solver.noise,
+        noise=noise,
         seed=opts.seed + 1,
         converged=True,
+        gauge_point=fit.x[6:9] if fit.spin_only else None,
         on_iteration=on_step,
     )
     noise_scale = 1.0 if fit.rms_m > NOISE_FREE_RMS_M else 0.0

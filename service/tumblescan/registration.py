@@ -50,11 +50,6 @@ def extent_m(frames_xyz: list[FloatArray]) -> float:
     return max((float(np.linalg.norm(np.ptp(f, axis=0))) for f in frames_xyz if len(f)), default=0.0)
 
 
-def voxel_size_m(frames_xyz: list[FloatArray]) -> float:
-    """A registration voxel fitting the target: a fixed fraction of its extent."""
-    return max(extent_m(frames_xyz) * VOXEL_FRACTION, 1e-3)
-
-
 def register_consecutive(
     frames_xyz: list[FloatArray],
     *,
