@@ -4,27 +4,33 @@ Every point ``p`` seen at ``t = T + tau`` maps to the reference time as
 
     M(p, tau; x) = O_p + R(tau)^T (p - O_p)
 
-and with the right motion the mapped frames coincide. Each frame is cut into surfels: the
-points of one voxel (of ``surfel_m``, in the frame's own coordinates), mapped to ``T`` with
-the current motion, give a centroid ``a`` and a normal ``n`` (principal axes). A surfel is
-attached to the line of its mean time, so it moves with the motion like a point. For a source
-point ``p`` of one frame and the nearest planar surfel of another, the residual is
+and with the right motion the mapped frames coincide. Each frame is cut into surfels, cells
+of the sensor's view about ``surfel_m`` wide (cut in direction, so that range noise cannot
+move a point from one cell to another). A surfel's points, mapped to ``T`` with the current
+motion, give its centroid ``a`` and normal ``n`` (principal axes); the surfel is attached to
+the line of its mean time, so it moves with the motion like a point. For a source surfel
+``a_s`` of one frame and the nearest planar surfel ``(a_t, n_t)`` of another, the residual is
+the centroid-to-plane distance
 
-    r = n(x) . (M(p, tau_p; x) - a(x)),    var r = s^2 (v_p + v_a / count_a)
+    r = n_t(x) . (a_s(x) - a_t(x)),
+    var r = s^2 (v_s / N_s + v_t / N_t + d^2 v_n)
 
-with ``v`` the sensor's variance along ``n`` (range noise along the line of sight, angle noise
-across it, ``SensorNoise``) and ``s`` a common scale estimated from the residuals. The fit
-minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
-Gauss-Newton steps, with correspondences re-found after each step (as ICP does) and the
-surfels rebuilt once the rotation has moved.
+with ``v`` the sensor's variance along ``n_t`` (range noise along the line of sight, angle
+noise across it, ``SensorNoise``), ``N`` the surfels' point counts, ``d`` the in-plane offset
+between the centroids, ``v_n`` the variance of the target normal's tilt, and ``s`` a common
+scale estimated from the residuals. A centroid carries what its points say along the normal,
+so every point of a planar surfel enters the fit at the cost of one residual per partner.
+The fit minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
+Levenberg-Marquardt steps, with correspondences re-found once points have moved and the
+surfels rebuilt after large steps.
 
-Three stages: a few sources matched in the next frames only (right correspondences even from
-the initializer's rough start), then in any frame (the long time baselines fix the rates),
-then many sources from the converged start (precision: the covariance scales as 1/sources).
+Three stages: every surfel matched in the next frames only (right correspondences even from
+the initializer's rough start), then in random frames (the long time baselines fix the
+rates), then in more random frames from the converged start (each brings its own noise).
 
 Covariance: the sandwich ``H^-1 (sum_c g_c g_c^T) H^-1`` with ``H = J^T W J`` and ``g_c`` the
-gradient of all residuals of source point ``c`` (one point enters several pairs, so its noise
-is counted once).
+gradient of all residuals of source surfel ``c`` (one surfel enters several pairs, so its
+noise is counted once).
 """
 
 from __future__ import annotations
@@ -78,9 +84,10 @@ class DenseConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     surfel_m: float | None = Field(None, gt=0, description="surfel size; default (estimate_from_frames): extent / 100")
-    coarse_sources: int = Field(20_000, ge=100, le=10_000_000, description="source points of the first two stages")
-    sources: int = Field(200_000, ge=100, le=100_000_000, description="source points of the last stage")
-    partners: int = Field(2, ge=1, le=100, description="other frames each source point is matched in")
+    partners: int = Field(2, ge=1, le=100, description="other frames each surfel is matched in (second stage)")
+    fine_partners: int = Field(
+        14, ge=1, le=100, description="other frames each surfel is matched in (last stage; all of them if fewer)"
+    )
     near_window: int = Field(2, ge=1, le=100, description="frames either side matched in the first stage")
     max_iterations: int = Field(15, ge=1, le=1000, description="Gauss-Newton steps in each of the first two stages")
     fine_iterations: int = Field(6, ge=1, le=1000, description="Gauss-Newton steps in the last stage")
@@ -93,8 +100,9 @@ class DenseConfig(BaseModel):
 class DenseFit:
     """Result of :func:`refine_dense`: canonical 9-vector, its 9x9 covariance, fit statistics.
 
-    rms_m: RMS point-to-plane residual of the inliers; frame_rms_m: the same per frame (as
-    source or target); residuals: residuals used; sources: distinct source points.
+    rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
+    source or target); residuals: residuals used; surfels: distinct source surfels; points:
+    the points in them.
     """
 
     x: FloatArray
@@ -103,7 +111,8 @@ class DenseFit:
     rms_m: float
     frame_rms_m: FloatArray
     residuals: int
-    sources: int
+    surfels: int
+    points: int
     iterations: int
 
     @property
@@ -269,6 +278,7 @@ class _Surfels:
     count: FloatArray
     planar: NDArray[np.bool_]
     var_m2: FloatArray
+    normal_var_rad2: FloatArray
     mapping: _Mapping  # the motion they were built with
 
 
@@ -300,13 +310,15 @@ def _surfels(data: DenseData, mapping: _Mapping, noise: SensorNoise) -> _Surfels
     var = _normal_variance(noise, anchor_obs, normal_obs)
     planar = _planar(w, var, count)
     planar &= data.interior
-    return _Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, mapping)
+    # The normal's tilt from noise: the sensor's variance along it over the in-plane spread.
+    normal_var = var / (np.maximum(count, 1) * np.maximum(w[:, 1], 1e-300))
+    return _Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping)
 
 
 @dataclass(frozen=True)
 class _Matches:
-    src: IntArray  # source point of each residual (also its cluster in the sandwich covariance)
-    dst: IntArray  # surfel
+    src: IntArray  # source surfel of each residual (also its cluster in the sandwich covariance)
+    dst: IntArray  # target surfel
 
 
 def _match(
@@ -321,21 +333,20 @@ def _match(
     within ``gate_m`` and faces the same way as the source's own surfel."""
     anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
     normal_ref = mapping.rotate(surf.normal_obs, surf.line)
-    own = data.cell[src]
-    usable = surf.planar[own]
-    src, partner, own = src[usable], partner[usable], own[usable]
-    mapped = mapping.apply(data.xyz_m[src], data.line[src])
+    usable = surf.planar[src]
+    src, partner = src[usable], partner[usable]
+    mapped = anchor_ref[src]
     src_all, dst_all = [], []
     for b in range(data.n_frames):
         sel = np.flatnonzero(partner == b)
-        cells = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        if len(sel) == 0 or len(cells) == 0:
+        targets = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        if len(sel) == 0 or len(targets) == 0:
             continue
-        dist, nn = cKDTree(anchor_ref[cells]).query(mapped[sel], k=1, distance_upper_bound=gate_m, workers=-1)
+        dist, nn = cKDTree(anchor_ref[targets]).query(mapped[sel], k=1, distance_upper_bound=gate_m, workers=-1)
         ok = np.isfinite(dist)
-        dst = cells[nn[ok]]
+        dst = targets[nn[ok]]
         s = sel[ok]
-        facing = np.einsum("ni,ni->n", normal_ref[own[s]], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS
+        facing = np.einsum("ni,ni->n", normal_ref[src[s]], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS
         src_all.append(src[s[facing]])
         dst_all.append(dst[facing])
     src_c = np.concatenate(src_all) if src_all else np.zeros(0, np.int64)
@@ -345,26 +356,35 @@ def _match(
 
 @dataclass(frozen=True)
 class _Linearized:
-    r: FloatArray  # point-to-plane residuals (m)
+    r: FloatArray  # centroid-to-plane residuals (m)
     J: FloatArray  # their derivatives w.r.t. the free parameters
     var: FloatArray  # model variance of each residual (m^2), before the common scale
 
 
-def _residuals(data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches) -> tuple[FloatArray, FloatArray]:
-    """Point-to-plane residuals and the target normals at ``T``."""
-    p = mapping.apply(data.xyz_m[m.src], data.line[m.src])
+def _residuals(
+    data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Centroid-to-plane residuals, the target normals at ``T`` and the squared in-plane offsets."""
+    p = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
     q = mapping.apply(surf.anchor_obs[m.dst], surf.line[m.dst])
     n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst])
-    return np.asarray(np.einsum("ni,ni->n", n, p - q)), n
+    d = p - q
+    r = np.einsum("ni,ni->n", n, d)
+    return np.asarray(r), n, np.asarray(np.einsum("ni,ni->n", d, d) - r**2)
 
 
 def _linearize(data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches, noise: SensorNoise) -> _Linearized:
-    xyz, line = data.xyz_m[m.src], data.line[m.src]
-    r, n = _residuals(data, mapping, surf, m)
+    xyz, line = surf.anchor_obs[m.src], surf.line[m.src]
+    r, n, offset2 = _residuals(data, mapping, surf, m)
     J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
-    # The source's noise along the target's normal, seen from the source's own sensor.
+    # The source centroid's noise along the target's normal, seen from the source's own sensor;
+    # the target centroid's; and the target normal's tilt over the offset between the two.
     n_src_obs = np.einsum("nji,nj->ni", mapping.Rt[line], n)
-    var = _normal_variance(noise, xyz, n_src_obs) + surf.var_m2[m.dst] / surf.count[m.dst]
+    var = (
+        _normal_variance(noise, xyz, n_src_obs) / surf.count[m.src]
+        + surf.var_m2[m.dst] / surf.count[m.dst]
+        + offset2 * surf.normal_var_rad2[m.dst]
+    )
     return _Linearized(np.asarray(r), J, np.asarray(var))
 
 
@@ -417,12 +437,12 @@ def refine_dense(
 ) -> DenseFit:
     """Refine ``x0`` (a 9-vector at the reference time of ``data.tau_s``); see the module docstring.
 
-    data: the frames (:func:`prepare`). spin_only: fix the precession rate at 0 and pin the
-    centre on the spin axis nearest the sources' centroid. noise: the sensor's noise model
+    data: the frames (:func:`prepare`). spin_only: fix the precession rate at 0 and keep the
+    centre on the spin axis, at the point nearest the points' centroid. noise: the sensor's noise model
     (weights, planarity test, correspondence gate). converged: ``x0`` is already a solution
     (of a superset of these frames, say): run the last stage only, from the tightest gate.
     gauge_point: spin-only, the point whose nearest axis point is reported as the centre
-    (default: the sources' centroid at ``T``); give the same one to compare two fits.
+    (default: the points' centroid at ``T``); give the same one to compare two fits.
     on_iteration(step, max_steps): called after each step; it may raise to stop.
     """
     cfg = config or DenseConfig()
@@ -430,27 +450,28 @@ def refine_dense(
     free = SPIN_ONLY_FREE if spin_only else ALL_FREE
     base = np.asarray(x0, dtype=float).copy()
     rng = np.random.default_rng(seed)
-    coarse = _choose_sources(data, cfg.coarse_sources, rng)
-    fine = _choose_sources(data, cfg.sources, rng)
     gauge = None
     if spin_only:
         base[3:6] = 0.0
+        every = data.xyz_m[:: max(1, len(data.xyz_m) // PROBE_POINTS)]
+        every_line = data.line[:: max(1, len(data.xyz_m) // PROBE_POINTS)]
         gauge = (
             np.asarray(gauge_point, dtype=float)
             if gauge_point is not None
-            else _Mapping(base, data.tau_s, free).apply(data.xyz_m[coarse], data.line[coarse]).mean(axis=0)
+            else _Mapping(base, data.tau_s, free).apply(every, every_line).mean(axis=0)
         )
     problem = _Problem(data, free, base, cfg, sensor, gauge)
     base[:] = _on_gauge(problem, base)
     z = base[list(free)]
     step = 0
-    stages: list[tuple[tuple[IntArray, IntArray], int]] = [
+    cells = np.arange(len(data.cell_frame), dtype=np.int64)
+    stages = [
         # 1. Neighbouring frames only: right correspondences even from a rough start.
-        (_partners(data, coarse, rng, window=cfg.near_window, k=1), cfg.max_iterations),
+        (_partners(data, cells, rng, window=cfg.near_window, k=1), cfg.max_iterations),
         # 2. Any frame: long baselines pin the rates down.
-        (_partners(data, coarse, rng, window=None, k=cfg.partners), cfg.max_iterations),
-        # 3. Many sources from the converged start: precision.
-        (_partners(data, fine, rng, window=None, k=cfg.partners), cfg.fine_iterations),
+        (_partners(data, cells, rng, window=None, k=cfg.partners), cfg.max_iterations),
+        # 3. More partners from the converged start: each brings its own target noise.
+        (_partners(data, cells, rng, window=None, k=cfg.fine_partners), cfg.fine_iterations),
     ]
     surf: _Surfels | None = None
     gate = max(data.extent_m / 20, 5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
@@ -465,20 +486,18 @@ def refine_dense(
     return _finish(problem, z, matches, surf, step)
 
 
-def _choose_sources(data: DenseData, n: int, rng: np.random.Generator) -> IntArray:
-    if n >= len(data.xyz_m):
-        return np.arange(len(data.xyz_m), dtype=np.int64)
-    return np.sort(rng.choice(len(data.xyz_m), n, replace=False)).astype(np.int64)
-
-
 def _partners(
     data: DenseData, src: IntArray, rng: np.random.Generator, *, window: int | None, k: int
 ) -> tuple[IntArray, IntArray]:
-    """``k`` random other frames for each source (within ``window`` frames of its own, if given):
-    the pairs as parallel arrays ``(source, partner frame)``."""
+    """``k`` random other frames for each source surfel (within ``window`` frames of its own, if
+    given): the pairs as parallel arrays ``(source, partner frame)``."""
     F = data.n_frames
     reach = F - 1 if window is None else min(window, F - 1)
-    own = data.frame[src]
+    own = data.cell_frame[src]
+    if window is None and k >= F - 1:
+        # Every other frame, in order: nothing left to chance.
+        b = (own[:, None] + np.arange(1, F)[None, :]) % F
+        return np.repeat(src, F - 1), b.ravel()
     offsets = np.concatenate([-np.arange(reach, 0, -1), np.arange(1, reach + 1)])
     out_src, out_partner = [], []
     for _ in range(min(k, 2 * reach)):
@@ -509,7 +528,7 @@ def _iterate(
     distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
     floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
-    probe = src[:: max(1, len(src) // PROBE_POINTS)]
+    probe = np.arange(0, len(data.xyz_m), max(1, len(data.xyz_m) // PROBE_POINTS))
     mapping = _Mapping(problem.full(z), data.tau_s, problem.free)
     if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = _surfels(data, mapping, noise)
@@ -570,7 +589,7 @@ def _damped_step(
         x = _on_gauge(problem, problem.full(z + step))
         dz = x[list(problem.free)] - z
         mapping = _Mapping(x, data.tau_s, problem.free)
-        r, _ = _residuals(data, mapping, surf, matches)
+        r = _residuals(data, mapping, surf, matches)[0]
         after = _cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
             return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
@@ -611,7 +630,7 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfels, steps
     mapping = _Mapping(x, data.tau_s, problem.free)
     lin = _linearize(data, mapping, surf, m, problem.noise)
     w, scale = _weights(lin)
-    cov_free = _sandwich(lin.J, lin.r, w, m.src, _gauge_row(problem, x))
+    cov_free = _sandwich(lin.J, lin.r, w, m, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
@@ -631,22 +650,25 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: _Surfels, steps
         rms_m=float(np.sqrt(np.mean(r_in**2))) if len(r_in) else float("nan"),
         frame_rms_m=frame_rms,
         residuals=len(lin.r),
-        sources=len(np.unique(m.src)),
+        surfels=len(np.unique(m.src)),
+        points=int(surf.count[np.unique(m.src)].sum()),
         iterations=steps,
     )
 
 
-def _sandwich(
-    J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, gauge_row: FloatArray | None
-) -> FloatArray:
-    """``H^-1 B H^-1``: ``H = J^T W J``, ``B`` sums each source point's gradient outer product."""
+def _sandwich(J: FloatArray, r: FloatArray, w: FloatArray, m: _Matches, gauge_row: FloatArray | None) -> FloatArray:
+    """``H^-1 B H^-1`` with ``H = J^T W J`` and ``B`` the dyadic-cluster sum: a residual carries the
+    noise of two surfels (source and target), so the gradients ``g_i`` of residuals sharing a
+    surfel in either role are correlated. ``B = sum_c G_c G_c^T - sum_i g_i g_i^T`` with ``G_c``
+    the sum over residuals touching surfel ``c`` (each residual touches two)."""
     Jw = J * w[:, None]
     H = J.T @ Jw
     g = Jw * r[:, None]
-    _, inv = np.unique(cluster, return_inverse=True)
-    G = np.zeros((int(inv.max()) + 1 if len(inv) else 0, J.shape[1]))
-    np.add.at(G, inv, g)
-    B = G.T @ G
+    size = int(max(m.src.max(initial=-1), m.dst.max(initial=-1))) + 1
+    G = np.zeros((size, J.shape[1]))
+    np.add.at(G, m.src, g)
+    np.add.at(G, m.dst, g)
+    B = G.T @ G - g.T @ g
     if gauge_row is not None:
         # The centre's slide along the spin axis is fixed (see _on_gauge): no variance there.
         H = H + np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(H)

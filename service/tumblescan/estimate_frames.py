@@ -77,7 +77,7 @@ def estimate_from_frames(
     -------
     MotionResult
         As for tracks; ``fit.source`` is ``frames`` and ``fit.frame_rms_m`` gives each
-        frame's point-to-plane residual.
+        frame's centroid-to-plane residual.
     """
     report = progress or (lambda stage, fraction: None)
     with threadpool_limits(1, user_api="blas"):
@@ -297,7 +297,7 @@ def _result(
                 "frames": frames.n_frames,
                 "outliers": 0,
                 "source": "frames",
-                "points_used": fit.sources,
+                "points_used": fit.points,
                 "frame_rms_m": frame_rms,
             },
             "validation": validation_fields(check, frames.n_frames, n2),
