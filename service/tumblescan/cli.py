@@ -285,7 +285,7 @@ def _fit_line(r: MotionResult) -> str:
         worst = max(((v, i) for i, v in enumerate(f.frame_rms_m or []) if v is not None), default=None)
         tail = f", worst frame {worst[1]} ({worst[0]:.3g} m)" if worst else ""
         return (
-            f"fit              rms {f.rms_residual_m:.3g} m point-to-plane over {f.points_used} sampled of "
+            f"fit              rms {f.rms_residual_m:.3g} m surfel-to-plane, {f.points_used} of "
             f"{f.observations} points, {f.frames} frames{tail}"
         )
     return (

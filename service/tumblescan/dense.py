@@ -266,6 +266,16 @@ def _planar(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.boo
     )
 
 
+def _noise_cov(noise: SensorNoise, xyz_obs: FloatArray) -> FloatArray:
+    """Sensor covariance of a point at ``xyz_obs`` (its own frame), ``(n, 3, 3)``: range noise
+    along the line of sight, angle noise across it."""
+    rho = np.linalg.norm(xyz_obs, axis=1)
+    u = xyz_obs / np.maximum(rho, 1e-300)[:, None]
+    uu = u[:, :, None] * u[:, None, :]
+    across = (noise.angle_sigma_rad * rho) ** 2
+    return np.asarray(noise.range_sigma_m**2 * uu + across[:, None, None] * (np.eye(3) - uu))
+
+
 @dataclass(frozen=True)
 class _Surfels:
     """Every surfel at its own line's observation time (sensor frame): centroid, unit normal
@@ -303,7 +313,11 @@ def _surfels(data: DenseData, mapping: _Mapping, noise: SensorNoise) -> _Surfels
     # Back to the observation time: v_obs = R(tau) v_ref (about the centre for positions).
     Rt = mapping.Rt[line]
     anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
-    w, V = np.linalg.eigh(cov)
+    # Range noise stretches every surfel along the line of sight, which tilts the thinnest
+    # axis of its scatter towards it (by degrees, and differently in every frame as the target
+    # turns): the normal is taken from the scatter less the sensor's own covariance.
+    w, _ = np.linalg.eigh(cov)
+    _, V = np.linalg.eigh(cov - np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs), Rt))
     normal_obs = np.einsum("nji,nj->ni", Rt, V[:, :, 0])
     # The sensor is at the origin of its own frame: normals face it.
     normal_obs *= np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None]
@@ -364,10 +378,17 @@ class _Linearized:
 def _residuals(
     data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Centroid-to-plane residuals, the target normals at ``T`` and the squared in-plane offsets."""
+    """Centroid-to-plane residuals, the plane normals at ``T`` and the squared in-plane offsets.
+
+    The plane's normal is the mean of both surfels' (a symmetric objective): the normal's
+    noise times the in-plane offset between the centroids is the largest term of a residual's
+    variance, and the mean halves it."""
     p = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
     q = mapping.apply(surf.anchor_obs[m.dst], surf.line[m.dst])
-    n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst])
+    n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst]) + mapping.rotate(
+        surf.normal_obs[m.src], surf.line[m.src]
+    )
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
     d = p - q
     r = np.einsum("ni,ni->n", n, d)
     return np.asarray(r), n, np.asarray(np.einsum("ni,ni->n", d, d) - r**2)
@@ -377,13 +398,13 @@ def _linearize(data: DenseData, mapping: _Mapping, surf: _Surfels, m: _Matches, 
     xyz, line = surf.anchor_obs[m.src], surf.line[m.src]
     r, n, offset2 = _residuals(data, mapping, surf, m)
     J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
-    # The source centroid's noise along the target's normal, seen from the source's own sensor;
-    # the target centroid's; and the target normal's tilt over the offset between the two.
+    # The source centroid's noise along the normal, seen from the source's own sensor; the
+    # target centroid's; and the normal's tilt over the offset between the two.
     n_src_obs = np.einsum("nji,nj->ni", mapping.Rt[line], n)
     var = (
         _normal_variance(noise, xyz, n_src_obs) / surf.count[m.src]
         + surf.var_m2[m.dst] / surf.count[m.dst]
-        + offset2 * surf.normal_var_rad2[m.dst]
+        + offset2 * (surf.normal_var_rad2[m.src] + surf.normal_var_rad2[m.dst]) / 4
     )
     return _Linearized(np.asarray(r), J, np.asarray(var))
 

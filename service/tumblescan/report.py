@@ -66,7 +66,7 @@ def build_report(inputs: ReportInputs) -> str:
         parts += ["<h2>Residuals per frame</h2>", _figure_residuals(frames, rms)]
     elif r.fit.frame_rms_m is not None:
         rms = np.array([np.nan if v is None else v for v in r.fit.frame_rms_m])
-        parts += ["<h2>Point-to-plane residuals per frame</h2>", _figure_residuals(np.arange(len(rms)), rms)]
+        parts += ["<h2>Surfel-to-plane residuals per frame (RMS)</h2>", _figure_residuals(np.arange(len(rms)), rms)]
     body = "\n".join(parts)
     script = plotly.offline.get_plotlyjs()
     return f"""<!DOCTYPE html>

@@ -43,15 +43,18 @@ class UncertaintyPublic(_Strict):
 
 
 class FitPublic(_Strict):
-    rms_residual_m: float = Field(description="tracks: RMS position residual; frames: RMS point-to-plane residual")
+    rms_residual_m: float = Field(
+        description="tracks: RMS position residual; frames: RMS surfel centroid-to-plane residual"
+    )
     observations: int = Field(description="all observations (tracks) or points (frames) given, outliers included")
     tracks: int = Field(description="feature tracks; 0 when the motion came from dense frames")
     frames: int
     outliers: int = Field(0, description="observations rejected as outliers (counted in observations)")
     source: Literal["tracks", "frames"] = "tracks"
-    points_used: int | None = Field(None, description="frames: sampled points matched across frames in the fit")
+    points_used: int | None = Field(None, description="frames: points in the surfels matched across frames in the fit")
     frame_rms_m: list[float | None] | None = Field(
-        None, description="frames: RMS point-to-plane residual of each frame (null: no matches); a bad frame stands out"
+        None,
+        description="frames: RMS centroid-to-plane residual of each frame (null: no matches); a bad frame stands out",
     )
 
 
