@@ -29,8 +29,8 @@ from tumblescan import (
     simulate_frames,
     write_ply,
 )
-from tumblescan.dense import prepare
 from tumblescan.errors import InputError
+from tumblescan.surfels import prepare
 
 from .live import serve
 

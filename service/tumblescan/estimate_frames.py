@@ -24,7 +24,7 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
-from .dense import DenseData, DenseFit, prepare, refine_dense
+from .dense import DenseFit, refine_dense
 from .errors import InputError
 from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
 from .frames import Frames
@@ -33,6 +33,7 @@ from .motion import rotate
 from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
 from .result import MotionResult
 from .sensor import SensorNoise
+from .surfels import DenseData, prepare
 from .uncertainty import Similarity, similarity
 
 FloatArray = NDArray[np.float64]

@@ -1,0 +1,241 @@
+"""Surfels: small planar patches of each frame, and the per-line rotations that move them.
+
+Each frame is cut into cells of the sensor's view (direction, not 3D: a 3D voxel whose face
+cuts a surface keeps the points that range noise pushed inside, and its centroid sits off the
+surface). With a motion ``x``, every point ``p`` seen at ``t = T + tau`` maps to the reference
+time as ``M(p, tau; x) = O_p + R(tau)^T (p - O_p)``; a surfel's points mapped so give its
+centroid and normal, and the surfel is attached to the line of its mean time so that it moves
+with the motion like a point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .motion import axis_from_angles, rotation_matrix
+from .sensor import SensorNoise, azimuth_elevation
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
+# A surfel is planar when its thinnest axis is this much thinner than the next one and no
+# thicker than a few sensor sigmas (an edge or a corner is thick for its size).
+MAX_FLATNESS = 0.3
+MAX_THICKNESS_SIGMAS = 2.5
+MIN_SURFEL_POINTS = 6
+# Neighbouring cells of one surface differ in range by less than this many surfel sizes.
+MAX_RANGE_STEP = 4.0
+
+
+@dataclass(frozen=True)
+class DenseData:
+    """Every point of the frames with its line time and surfel.
+
+    xyz_m: ``(n, 3)`` sensor frame at observation; frame: ``(n,)``; line: ``(n,)`` index into
+    ``tau_s`` (distinct offsets from ``T``, s); cell: ``(n,)`` surfel index; cell_frame:
+    ``(m,)`` frame of each surfel.
+    """
+
+    xyz_m: FloatArray
+    frame: IntArray
+    line: IntArray
+    tau_s: FloatArray
+    cell: IntArray
+    cell_frame: IntArray
+    n_frames: int
+    surfel_m: float
+    extent_m: float
+    interior: NDArray[np.bool_]
+
+    def first_frames(self, n: int) -> DenseData:
+        """The same data restricted to frames ``0 .. n-1``."""
+        if n >= self.n_frames:
+            return self
+        keep = self.frame < n
+        kept_cells = self.cell_frame < n
+        new_cell = np.cumsum(kept_cells) - 1
+        return DenseData(
+            self.xyz_m[keep],
+            self.frame[keep],
+            self.line[keep],
+            self.tau_s,
+            new_cell[self.cell[keep]].astype(np.int64),
+            self.cell_frame[kept_cells],
+            n,
+            self.surfel_m,
+            self.extent_m,
+            self.interior[kept_cells],
+        )
+
+
+def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: float) -> DenseData:
+    """Group points into lines (distinct ``tau_s``) and surfels: per frame, cells of the
+    sensor's view about ``surfel_m`` wide at the median range. Cells are cut in direction, not
+    in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
+    surface keeps the points that noise pushed inside, and its centroid is biased off the surface."""
+    tau_u, line = np.unique(tau_s, return_inverse=True)
+    az, el = azimuth_elevation(xyz_m)
+    step = surfel_m / float(np.median(np.linalg.norm(xyz_m, axis=1)))
+    a = np.floor((az - az.min()) / step).astype(np.int64)
+    e = np.floor((el - el.min()) / step).astype(np.int64)
+    f = frame.astype(np.int64)
+    dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
+    key = (f * dims[0] + a + 1) * dims[1] + e + 1
+    keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
+    rho = np.bincount(cell, np.linalg.norm(xyz_m, axis=1)) / np.bincount(cell)
+    return DenseData(
+        np.asarray(xyz_m, dtype=float),
+        f,
+        line.astype(np.int64),
+        tau_u,
+        cell.astype(np.int64),
+        f[first],
+        int(f.max()) + 1,
+        surfel_m,
+        float(np.linalg.norm(np.ptp(xyz_m, axis=0))),
+        _interior(keys, rho, dims[1], max_step_m=MAX_RANGE_STEP * surfel_m),
+    )
+
+
+def _interior(keys: IntArray, rho_m: FloatArray, stride: int, *, max_step_m: float) -> NDArray[np.bool_]:
+    """Cells whose 4 neighbours in the view were hit too, at nearly the same range: not on the
+    edge of the field of view, of the target's silhouette or of an occlusion, where a partner
+    frame sees a different part of the scene and a match would land on the wrong surface."""
+    ok = np.ones(len(keys), bool)
+    for offset in (-stride, stride, -1, 1):
+        nb = keys + offset
+        pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
+        ok &= (keys[pos] == nb) & (np.abs(rho_m[pos] - rho_m) <= max_step_m)
+    return ok
+
+
+class LineMapping:
+    """``R(tau)^T`` per line and its derivatives w.r.t. the free parameters (complex step)."""
+
+    def __init__(self, x: FloatArray, tau_s: FloatArray, free: tuple[int, ...]) -> None:
+        self.x = x
+        self.tau_s = tau_s
+        self.Rt = _rotations_T(x.astype(complex)[None, :], tau_s)[0].real
+        self.free = free
+        self.center = x[6:9]
+
+    @cached_property
+    def dRt(self) -> FloatArray:
+        """``(lines, 9, k)``: row ``3a + b`` holds ``d(R^T)[a, b]`` for each free parameter."""
+        probes = np.tile(self.x.astype(complex), (len(self.free), 1))
+        probes[np.arange(len(self.free)), list(self.free)] += 1j * STEP
+        dRt = _rotations_T(probes, self.tau_s).imag / STEP  # (k, lines, 3, 3)
+        return np.ascontiguousarray(dRt.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(self.free)))
+
+    def apply(self, xyz: FloatArray, line: IntArray) -> FloatArray:
+        return np.asarray(self.center + np.einsum("nij,nj->ni", self.Rt[line], xyz - self.center))
+
+    def rotate(self, v: FloatArray, line: IntArray) -> FloatArray:
+        return np.asarray(np.einsum("nij,nj->ni", self.Rt[line], v))
+
+    def normal_derivative(self, n: FloatArray, xyz: FloatArray, line: IntArray) -> FloatArray:
+        """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``; the centre enters as ``(I - R^T)``."""
+        v = xyz - self.center
+        out = np.zeros((len(xyz), len(self.free)))
+        for a in range(3):
+            for b in range(3):
+                out += (n[:, a] * v[:, b])[:, None] * self.dRt[line, 3 * a + b]
+        Rtn = np.einsum("nab,na->nb", self.Rt[line], n)
+        for j, p in enumerate(self.free):
+            if p >= 6:
+                out[:, j] += n[:, p - 6] - Rtn[:, p - 6]
+        return out
+
+
+def _rotations_T(x: NDArray[np.complex128], tau_s: FloatArray) -> NDArray[np.complex128]:
+    """``R(tau)^T = Rs^T Rp^T`` for parameter rows ``(k, 9)`` and offsets ``(m,)``: ``(k, m, 3, 3)``."""
+    l_s = axis_from_angles(x[:, 0], x[:, 1])[:, None, :]
+    l_p = axis_from_angles(x[:, 3], x[:, 4])[:, None, :]
+    Rs = rotation_matrix(l_s, x[:, [2]] * tau_s)
+    Rp = rotation_matrix(l_p, x[:, [5]] * tau_s)
+    return np.asarray(np.swapaxes(Rp @ Rs, -1, -2))
+
+
+def normal_variance(noise: SensorNoise, xyz_obs: FloatArray, n_obs: FloatArray) -> FloatArray:
+    """Variance of a measured point along the unit normal ``n_obs``: range noise along the
+    line of sight ``u`` and angle noise across it, ``s_r^2 (n.u)^2 + (s_a rho)^2 (1 - (n.u)^2)``."""
+    rho = np.linalg.norm(xyz_obs, axis=1)
+    cos2 = (np.einsum("ni,ni->n", xyz_obs, n_obs) / np.maximum(rho, 1e-300)) ** 2
+    return np.asarray(noise.range_sigma_m**2 * cos2 + (noise.angle_sigma_rad * rho) ** 2 * (1 - cos2))
+
+
+def _planar(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
+    """Surfels flat for their size and no thicker than a few sensor sigmas (eigenvalues ``w``
+    ascending; an edge or a corner is thick)."""
+    thin = w[:, 0]
+    return np.asarray(
+        (count >= MIN_SURFEL_POINTS) & (thin <= MAX_FLATNESS * w[:, 1]) & (thin <= MAX_THICKNESS_SIGMAS**2 * var)
+    )
+
+
+def _noise_cov(noise: SensorNoise, xyz_obs: FloatArray) -> FloatArray:
+    """Sensor covariance of a point at ``xyz_obs`` (its own frame), ``(n, 3, 3)``: range noise
+    along the line of sight, angle noise across it."""
+    rho = np.linalg.norm(xyz_obs, axis=1)
+    u = xyz_obs / np.maximum(rho, 1e-300)[:, None]
+    uu = u[:, :, None] * u[:, None, :]
+    across = (noise.angle_sigma_rad * rho) ** 2
+    return np.asarray(noise.range_sigma_m**2 * uu + across[:, None, None] * (np.eye(3) - uu))
+
+
+@dataclass(frozen=True)
+class Surfels:
+    """Every surfel at its own line's observation time (sensor frame): centroid, unit normal
+    facing the sensor, line, point count, whether it is planar, and the sensor variance of one
+    of its points along the normal."""
+
+    anchor_obs: FloatArray
+    normal_obs: FloatArray
+    line: IntArray
+    count: FloatArray
+    planar: NDArray[np.bool_]
+    var_m2: FloatArray
+    normal_var_rad2: FloatArray
+    mapping: LineMapping  # the motion they were built with
+
+
+def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
+    """Voxel moments of the points mapped to ``T``; normals are the thinnest principal axes."""
+    m = len(data.cell_frame)
+    origin = mapping.center
+    mapped = mapping.apply(data.xyz_m, data.line) - origin
+    count = np.bincount(data.cell, minlength=m).astype(float)
+    safe = np.maximum(count, 1)
+    mean = np.stack([np.bincount(data.cell, mapped[:, i], minlength=m) for i in range(3)], axis=1) / safe[:, None]
+    cov = np.empty((m, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            s = np.bincount(data.cell, mapped[:, i] * mapped[:, j], minlength=m) / safe - mean[:, i] * mean[:, j]
+            cov[:, i, j] = cov[:, j, i] = s
+    # Each surfel takes the line nearest its points' mean time.
+    tau_mean = np.bincount(data.cell, data.tau_s[data.line], minlength=m) / safe
+    line = np.clip(np.searchsorted(data.tau_s, tau_mean), 0, len(data.tau_s) - 1)
+    lower = np.maximum(line - 1, 0)
+    line = np.where(np.abs(data.tau_s[lower] - tau_mean) < np.abs(data.tau_s[line] - tau_mean), lower, line)
+    # Back to the observation time: v_obs = R(tau) v_ref (about the centre for positions).
+    Rt = mapping.Rt[line]
+    anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
+    # Range noise stretches every surfel along the line of sight, which tilts the thinnest
+    # axis of its scatter towards it (by degrees, and differently in every frame as the target
+    # turns): the normal is taken from the scatter less the sensor's own covariance.
+    w, _ = np.linalg.eigh(cov)
+    _, V = np.linalg.eigh(cov - np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs), Rt))
+    normal_obs = np.einsum("nji,nj->ni", Rt, V[:, :, 0])
+    # The sensor is at the origin of its own frame: normals face it.
+    normal_obs *= np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None]
+    var = normal_variance(noise, anchor_obs, normal_obs)
+    planar = _planar(w, var, count)
+    planar &= data.interior
+    # The normal's tilt from noise: the sensor's variance along it over the in-plane spread.
+    normal_var = var / (np.maximum(count, 1) * np.maximum(w[:, 1], 1e-300))
+    return Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping)
