@@ -205,7 +205,7 @@ class Surfels:
 
 
 def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
-    """Voxel moments of the points mapped to ``T``; normals are the thinnest principal axes."""
+    """Moments of each cell's points mapped to ``T``: centroid, and normal from the scatter less the sensor's."""
     m = len(data.cell_frame)
     origin = mapping.center
     mapped = mapping.apply(data.xyz_m, data.line) - origin
