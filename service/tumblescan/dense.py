@@ -107,7 +107,7 @@ class DenseFit:
 
 @dataclass(frozen=True)
 class _Matches:
-    src: IntArray  # source surfel of each residual (also its cluster in the sandwich covariance)
+    src: IntArray  # source surfel of each residual
     dst: IntArray  # target surfel
 
 
@@ -151,9 +151,7 @@ class _Linearized:
     var: FloatArray  # model variance of each residual (m^2), before the common scale
 
 
-def _residuals(
-    data: DenseData, mapping: LineMapping, surf: Surfels, m: _Matches
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _residuals(mapping: LineMapping, surf: Surfels, m: _Matches) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Centroid-to-plane residuals, the plane normals at ``T`` and the squared in-plane offsets.
 
     The plane's normal is the mean of both surfels' (a symmetric objective): the normal's
@@ -172,7 +170,7 @@ def _residuals(
 
 def _linearize(data: DenseData, mapping: LineMapping, surf: Surfels, m: _Matches, noise: SensorNoise) -> _Linearized:
     xyz, line = surf.anchor_obs[m.src], surf.line[m.src]
-    r, n, offset2 = _residuals(data, mapping, surf, m)
+    r, n, offset2 = _residuals(mapping, surf, m)
     J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
     # The source centroid's noise along the normal, seen from the source's own sensor; the
     # target centroid's; and the normal's tilt over the offset between the two.
@@ -250,16 +248,15 @@ def refine_dense(
     gauge = None
     if spin_only:
         base[3:6] = 0.0
-        every = data.xyz_m[:: max(1, len(data.xyz_m) // PROBE_POINTS)]
-        every_line = data.line[:: max(1, len(data.xyz_m) // PROBE_POINTS)]
+        probe = _probe(data)
         gauge = (
             np.asarray(gauge_point, dtype=float)
             if gauge_point is not None
-            else LineMapping(base, data.tau_s, free).apply(every, every_line).mean(axis=0)
+            else LineMapping(base, data.tau_s, free).apply(data.xyz_m[probe], data.line[probe]).mean(axis=0)
         )
     problem = _Problem(data, free, base, cfg, sensor, gauge)
-    base[:] = _on_gauge(problem, base)
-    z = base[list(free)]
+    problem.base = _on_gauge(problem, base)
+    z = problem.base[list(free)]
     step = 0
     cells = np.arange(len(data.cell_frame), dtype=np.int64)
     stages = [
@@ -321,11 +318,11 @@ def _iterate(
     total: int,
     on_iteration: Callable[[int, int], None] | None,
 ) -> tuple[FloatArray, _Matches, Surfels, float, int]:
-    """Gauss-Newton steps on one set of (source, partner) pairs; ``gate`` is the largest
+    """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
     distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
     floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
-    probe = np.arange(0, len(data.xyz_m), max(1, len(data.xyz_m) // PROBE_POINTS))
+    probe = _probe(data)
     mapping = LineMapping(problem.full(z), data.tau_s, problem.free)
     if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = build_surfels(data, mapping, noise)
@@ -386,12 +383,17 @@ def _damped_step(
         x = _on_gauge(problem, problem.full(z + step))
         dz = x[list(problem.free)] - z
         mapping = LineMapping(x, data.tau_s, problem.free)
-        r = _residuals(data, mapping, surf, matches)[0]
+        r = _residuals(mapping, surf, matches)[0]
         after = _cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
             return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
     return None
+
+
+def _probe(data: DenseData) -> IntArray:
+    """About ``PROBE_POINTS`` points spread evenly over the cloud."""
+    return np.arange(0, len(data.xyz_m), max(1, len(data.xyz_m) // PROBE_POINTS), dtype=np.int64)
 
 
 def _shift(data: DenseData, probe: IntArray, before: LineMapping, after: LineMapping) -> float:
@@ -432,10 +434,11 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps:
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
     inlier = np.abs(lin.r) <= 3 * scale * np.sqrt(lin.var)
+    sources = np.unique(m.src)
     r_in = lin.r[inlier]
     frame_sq = np.zeros(data.n_frames)
     frame_n = np.zeros(data.n_frames)
-    for fr in (data.frame[m.src], data.cell_frame[m.dst]):
+    for fr in (data.cell_frame[m.src], data.cell_frame[m.dst]):
         np.add.at(frame_sq, fr[inlier], r_in**2)
         np.add.at(frame_n, fr[inlier], 1)
     frame_rms = np.sqrt(frame_sq / np.maximum(frame_n, 1))
@@ -447,8 +450,8 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps:
         rms_m=float(np.sqrt(np.mean(r_in**2))) if len(r_in) else float("nan"),
         frame_rms_m=frame_rms,
         residuals=len(lin.r),
-        surfels=len(np.unique(m.src)),
-        points=int(surf.count[np.unique(m.src)].sum()),
+        surfels=len(sources),
+        points=int(surf.count[sources].sum()),
         iterations=steps,
     )
 

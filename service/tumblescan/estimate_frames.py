@@ -94,14 +94,15 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     # 1. Thin every frame for registration; the dense fit uses every point.
     thin = _thin(frames, opts.seed)
     reg = _RegistrationPoints(cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin])
-    extent = extent_m(reg.split(reg.xyz_m, n_frames))
+    per_frame = reg.split(reg.xyz_m, n_frames)
+    extent = extent_m(per_frame)
     data = prepare(cloud.xyz_m, cloud.t_s - T, frames.frame, surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION)
     noise = opts.sensor or SensorNoise()
     warnings: list[str] = []
     # 2-3. Register, initialize and refine on all frames.
     progress("registering", 0.0)
     voxel = max(extent * VOXEL_FRACTION, 1e-3)
-    global_pairs = register_consecutive(reg.split(reg.xyz_m, n_frames), voxel_m=voxel, seed=opts.seed)
+    global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     main = _solve(data, reg, global_pairs, voxel, opts, noise, progress, warnings, spin_only=opts.model == "spin-only")
     fit = main.fit
     # 4. Model choice.

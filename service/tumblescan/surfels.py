@@ -80,14 +80,15 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
     surface keeps the points that noise pushed inside, and its centroid is biased off the surface."""
     tau_u, line = np.unique(tau_s, return_inverse=True)
     az, el = azimuth_elevation(xyz_m)
-    step = surfel_m / float(np.median(np.linalg.norm(xyz_m, axis=1)))
+    range_m = np.linalg.norm(xyz_m, axis=1)
+    step = surfel_m / float(np.median(range_m))
     a = np.floor((az - az.min()) / step).astype(np.int64)
     e = np.floor((el - el.min()) / step).astype(np.int64)
     f = frame.astype(np.int64)
     dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
     key = (f * dims[0] + a + 1) * dims[1] + e + 1
     keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
-    rho = np.bincount(cell, np.linalg.norm(xyz_m, axis=1)) / np.bincount(cell)
+    rho = np.bincount(cell, range_m) / np.bincount(cell)
     return DenseData(
         np.asarray(xyz_m, dtype=float),
         f,
