@@ -35,6 +35,7 @@ from tumblescan import (
 from tumblescan.result import MotionResult
 
 from .common import machine, out_dir, table
+from .dense_bound import dense_bound
 
 
 def errors(r: MotionResult, truth: object) -> dict[str, float]:
@@ -96,6 +97,7 @@ def one(seed: int, distance_m: float, workdir: Path) -> dict[str, object]:
     T = result.reference_time_s
     true_xyz = rectify(frames.cloud.xyz_m, frames.cloud.t_s, motion, to_time_s=T)
     rect_err = float(np.mean(np.linalg.norm(xyz - true_xyz, axis=1)))
+    bound = dense_bound(motion, scene, sim, result.reference_time_s)
     tracks, _ = simulate_tracks(motion, scene, seed=seed)
     corner = estimate_motion(tracks)
     return {
@@ -106,6 +108,7 @@ def one(seed: int, distance_m: float, workdir: Path) -> dict[str, object]:
         "stages_s": stages,
         "dense": errors(result, motion),
         "dense_validated": result.validation.passed,
+        "bound": bound,
         "corner": errors(corner, motion),
         "rectification_error_m": rect_err,
         "warnings": result.warnings,
@@ -158,6 +161,7 @@ def report(rows: list[dict[str, object]], distances: list[float]) -> None:
                 + [f"{np.median(errs[k]):.4f} / {np.percentile(errs[k], 95):.4f}" for k in keys]
                 + [f"{np.sqrt(np.nanmean(np.concatenate([sig[k] ** 2 for k in keys]))):.2f}", f"{100 * within:.0f} %"]
             )
+    print_bound(rows, distances, limits)
     print(f"\nDense frames vs corner tracks ({len(rows)} runs; {machine()}); errors median / p95")
     print(table(out, ["distance", "method", *keys, "RMS err/sigma", "all within target"]))
     sd_rows = []
@@ -191,6 +195,44 @@ def report(rows: list[dict[str, object]], distances: list[float]) -> None:
     dump = [{k: v for k, v in r.items() if k != "sample"} for r in rows]
     (out_dir() / "dense.json").write_text(json.dumps(dump, indent=1, default=float))
     plot(rows)
+
+
+def efficient_share(bound: dict[str, float], limits: dict[str, float]) -> float:
+    """Chance that an estimator reaching the bound meets every limit: a rate's error is normal
+    with sd ``b``; an axis error is 2-D with total sd ``b`` (Rayleigh, ``1 - exp(-L^2 / b^2)``)."""
+    from scipy.stats import norm
+
+    p = 1.0
+    for k, limit in limits.items():
+        b = bound[k]
+        p *= 1 - np.exp(-(limit**2) / b**2) if "axis" in k else 2 * norm.cdf(limit / b) - 1
+    return float(p)
+
+
+def print_bound(rows: list[dict[str, object]], distances: list[float], limits: dict[str, float]) -> None:
+    """The dense Cramer-Rao bound (bench/dense_bound.py) against the targets and the errors."""
+    keys = list(limits)
+    out = []
+    for distance in distances:
+        sel = [r for r in rows if r["distance_m"] == distance]
+        b = {k: np.array([r["bound"][k] for r in sel]) for k in keys}  # type: ignore[index]
+        e = {k: np.array([r["dense"][k] for r in sel]) for k in keys}  # type: ignore[index]
+        feasible = np.mean(np.all([2 * b[k] <= limits[k] for k in keys], axis=0))
+        expected = np.mean([efficient_share(r["bound"], limits) for r in sel])  # type: ignore[arg-type]
+        within = np.mean(np.all([e[k] <= limits[k] for k in keys], axis=0))
+        out.append(
+            [f"{distance:.0f} m"]
+            + [f"{np.median(b[k]):.4f} / {np.percentile(b[k], 95):.4f}" for k in keys]
+            + [f"{np.sqrt(np.mean(np.concatenate([(e[k] / b[k]) ** 2 for k in keys]))):.2f}"]
+            + [f"{100 * feasible:.0f} %", f"{100 * expected:.0f} %", f"{100 * within:.0f} %"]
+        )
+    print("\nCramer-Rao bound of dense frames (1 sigma, median / p95), and what it allows")
+    print(
+        table(
+            out,
+            ["distance", *keys, "RMS err/bound", "2 bound within targets", "expected within (efficient)", "within"],
+        )
+    )
 
 
 def plot(rows: list[dict[str, object]]) -> None:

@@ -15,6 +15,8 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import sparse
+from scipy.spatial import cKDTree
 
 from .motion import axis_from_angles, rotation_matrix
 from .sensor import SensorNoise, azimuth_elevation
@@ -30,6 +32,15 @@ MAX_THICKNESS_SIGMAS = 2.5
 MIN_SURFEL_POINTS = 6
 # Neighbouring cells of one surface differ in range by less than this many surfel sizes.
 MAX_RANGE_STEP = 4.0
+# A surfel's normal pools the planar cells of every frame within this many surfel sizes (at T)
+# whose own normals agree within this angle.
+SHARED_RADIUS = 1.5
+# Incidence beyond this cosine counts as grazing (the along-ray noise grows as tan^2).
+MIN_COS_INCIDENCE = 0.15
+NOISE_COV_PASSES = 2
+# A cell is inside a face when its 8 neighbours' normals agree with its own within this.
+FACE_MAX_ANGLE = np.radians(20.0)
+SHARED_MAX_ANGLE = np.radians(30.0)
 
 
 @dataclass(frozen=True)
@@ -51,6 +62,7 @@ class DenseData:
     surfel_m: float
     extent_m: float
     interior: NDArray[np.bool_]
+    neighbours: IntArray  # (m, 8) the cells around each in its frame's view, -1 where none
 
     def first_frames(self, n: int) -> DenseData:
         """The same data restricted to frames ``0 .. n-1``."""
@@ -59,6 +71,7 @@ class DenseData:
         keep = self.frame < n
         kept_cells = self.cell_frame < n
         new_cell = np.cumsum(kept_cells) - 1
+        nb = self.neighbours[kept_cells]
         return DenseData(
             self.xyz_m[keep],
             self.frame[keep],
@@ -70,6 +83,7 @@ class DenseData:
             self.surfel_m,
             self.extent_m,
             self.interior[kept_cells],
+            np.where(nb >= 0, new_cell[nb], -1).astype(np.int64),
         )
 
 
@@ -100,7 +114,19 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
         surfel_m,
         float(np.linalg.norm(np.ptp(xyz_m, axis=0))),
         _interior(keys, rho, dims[1], max_step_m=MAX_RANGE_STEP * surfel_m),
+        _view_neighbours(keys, dims[1]),
     )
+
+
+def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
+    """Index of the 8 cells around each cell of a frame's view, ``-1`` where none was hit."""
+    out = np.full((len(keys), 8), -1, dtype=np.int64)
+    offsets = [da * stride + de for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de]
+    for k, offset in enumerate(offsets):
+        nb = keys + offset
+        pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
+        out[:, k] = np.where(keys[pos] == nb, pos, -1)
+    return out
 
 
 def _interior(keys: IntArray, rho_m: FloatArray, stride: int, *, max_step_m: float) -> NDArray[np.bool_]:
@@ -179,14 +205,77 @@ def _planar(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.boo
     )
 
 
-def _noise_cov(noise: SensorNoise, xyz_obs: FloatArray) -> FloatArray:
-    """Sensor covariance of a point at ``xyz_obs`` (its own frame), ``(n, 3, 3)``: range noise
-    along the line of sight, angle noise across it."""
+def _inside_face(data: DenseData, normal_obs: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
+    """Cells whose 8 neighbours in the view were hit and face the same way (within
+    ``FACE_MAX_ANGLE``). A cell across an edge passes for flat when few of its points lie on
+    the other face, yet its normal and centroid lean towards that face, always the same way:
+    one of its neighbours lies on that face."""
+    nb = data.neighbours
+    ok = np.all(nb >= 0, axis=1)
+    safe = np.where(nb >= 0, nb, 0)
+    agree = np.abs(np.einsum("ni,nki->nk", normal_obs, normal_obs[safe])) > np.cos(FACE_MAX_ANGLE)
+    return np.asarray(ok & np.all(agree & (count[safe] >= MIN_SURFEL_POINTS), axis=1))
+
+
+def _facing_sensor(normal_obs: FloatArray, anchor_obs: FloatArray) -> FloatArray:
+    """Normals flipped, where needed, to face the sensor (at the origin of its own frame)."""
+    return np.asarray(normal_obs * np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None])
+
+
+def _shared_normals(
+    mean: FloatArray,
+    cov: FloatArray,
+    noise_cov: FloatArray,
+    count: FloatArray,
+    normal: FloatArray,
+    use: NDArray[np.bool_],
+    *,
+    radius_m: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Normals of the cells ``use`` (at ``T``) from the pooled moments of every used cell, of
+    any frame, whose centroid lies within ``radius_m`` and whose normal agrees within
+    ``SHARED_MAX_ANGLE`` (which keeps the other face of an edge, or of a thin panel, out):
+    ``(k, 3)`` normals and ``(k,)`` pooled count times in-plane variance."""
+    idx = np.flatnonzero(use)
+    tree = cKDTree(mean[idx])
+    pairs = tree.query_pairs(radius_m, output_type="ndarray")
+    i = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(len(idx))])
+    j = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(len(idx))])
+    agree = np.einsum("ni,ni->n", normal[idx[i]], normal[idx[j]]) > np.cos(SHARED_MAX_ANGLE)
+    i, j = i[agree], j[agree]
+    n = count[idx]
+    m = mean[idx]
+    moments = np.concatenate(
+        [
+            n[:, None],
+            n[:, None] * m,
+            (n[:, None, None] * (cov[idx] + m[:, :, None] * m[:, None, :])).reshape(-1, 9),
+            (n[:, None, None] * noise_cov[idx]).reshape(-1, 9),
+        ],
+        axis=1,
+    )
+    pooled = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(len(idx), len(idx))) @ moments
+    total = pooled[:, 0]
+    centre = pooled[:, 1:4] / total[:, None]
+    scatter = pooled[:, 4:13].reshape(-1, 3, 3) / total[:, None, None] - centre[:, :, None] * centre[:, None, :]
+    w, V = np.linalg.eigh(scatter - pooled[:, 13:22].reshape(-1, 3, 3) / total[:, None, None])
+    return np.asarray(V[:, :, 0]), np.asarray(total * np.maximum(w[:, 1], 0.0))
+
+
+def _noise_cov(noise: SensorNoise, xyz_obs: FloatArray, normal_obs: FloatArray) -> FloatArray:
+    """Covariance of a cell's points about the surface, ``(n, 3, 3)``, in the sensor frame.
+
+    A cell holds the points whose *measured* direction falls in it, so angle noise does not
+    spread them across the line of sight: it moves each along its measured ray, to the range
+    of the surface where the true ray hit, ``rho tan(theta)`` per radian for a surface whose
+    normal is ``theta`` from the line of sight ``u``. Hence all the noise lies along ``u``:
+    ``(s_r^2 + (s_a rho tan theta)^2) u u^T`` (along the normal this is the same variance as
+    :func:`normal_variance`)."""
     rho = np.linalg.norm(xyz_obs, axis=1)
     u = xyz_obs / np.maximum(rho, 1e-300)[:, None]
-    uu = u[:, :, None] * u[:, None, :]
-    across = (noise.angle_sigma_rad * rho) ** 2
-    return np.asarray(noise.range_sigma_m**2 * uu + across[:, None, None] * (np.eye(3) - uu))
+    cos2 = np.maximum(np.einsum("ni,ni->n", u, normal_obs) ** 2, MIN_COS_INCIDENCE**2)
+    along = noise.range_sigma_m**2 + (noise.angle_sigma_rad * rho) ** 2 * (1 - cos2) / cos2
+    return np.asarray(along[:, None, None] * u[:, :, None] * u[:, None, :])
 
 
 @dataclass(frozen=True)
@@ -228,15 +317,28 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
     # Range noise stretches every surfel along the line of sight, which tilts the thinnest
     # axis of its scatter towards it (by degrees, and differently in every frame as the target
-    # turns): the normal is taken from the scatter less the sensor's own covariance.
-    w, _ = np.linalg.eigh(cov)
-    _, V = np.linalg.eigh(cov - np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs), Rt))
-    normal_obs = np.einsum("nji,nj->ni", Rt, V[:, :, 0])
-    # The sensor is at the origin of its own frame: normals face it.
-    normal_obs *= np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None]
+    # turns): the normal is taken from the scatter less the noise's covariance, which lies
+    # along the ray and depends on the normal (:func:`_noise_cov`): start from the raw
+    # scatter's normal and refine.
+    normal_ref = np.linalg.eigh(cov)[1][:, :, 0]
+    for _ in range(NOISE_COV_PASSES):
+        normal_obs = np.einsum("nji,nj->ni", Rt, normal_ref)
+        noise_ref = np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs, normal_obs), Rt)
+        normal_ref = np.linalg.eigh(cov - noise_ref)[1][:, :, 0]
+    normal_obs = _facing_sensor(np.einsum("nji,nj->ni", Rt, normal_ref), anchor_obs)
     var = normal_variance(noise, anchor_obs, normal_obs)
-    planar = _planar(w, var, count)
-    planar &= data.interior
+    w = np.asarray(np.linalg.eigvalsh(cov), dtype=float)
+    planar = _planar(w, var, count) & data.interior & _inside_face(data, normal_obs, count)
+    spread = count * np.maximum(w[:, 1], 0.0)
+    # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
+    # the order of its variance: take it from every frame's planar cells nearby instead (with
+    # the cells across edges left out above, these all lie on one face).
+    normal_ref = np.einsum("nij,nj->ni", Rt, normal_obs)
+    shared, spread[planar] = _shared_normals(
+        mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
+    )
+    normal_obs[planar] = _facing_sensor(np.einsum("nji,nj->ni", Rt[planar], shared), anchor_obs[planar])
+    var = normal_variance(noise, anchor_obs, normal_obs)
     # The normal's tilt from noise: the sensor's variance along it over the in-plane spread.
-    normal_var = var / (np.maximum(count, 1) * np.maximum(w[:, 1], 1e-300))
+    normal_var = var / np.maximum(spread, 1e-300)
     return Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping)
