@@ -214,7 +214,8 @@ def _inside_face(data: DenseData, normal_obs: FloatArray, count: FloatArray) -> 
     ok = np.all(nb >= 0, axis=1)
     safe = np.where(nb >= 0, nb, 0)
     agree = np.abs(np.einsum("ni,nki->nk", normal_obs, normal_obs[safe])) > np.cos(FACE_MAX_ANGLE)
-    return np.asarray(ok & np.all(agree & (count[safe] >= MIN_SURFEL_POINTS), axis=1))
+    # A neighbour with too few points for a normal of its own neither vouches nor objects.
+    return np.asarray(ok & np.all(agree | (count[safe] < MIN_SURFEL_POINTS), axis=1))
 
 
 def _facing_sensor(normal_obs: FloatArray, anchor_obs: FloatArray) -> FloatArray:
