@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
+from tumblescan.sensor import perpendiculars
 from tumblescan.simulate import FrameCloud
 from tumblescan.surfels import LineMapping, normal_variance
 from tumblescan.uncertainty import axis_sigma_rad
@@ -65,7 +66,7 @@ def dense_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     n_faces = len(normals)
     ref = sim.reference_m[keep]
     centres = np.array([ref[face == f].mean(axis=0) if np.any(face == f) else np.zeros(3) for f in range(n_faces)])
-    tangents = _tangents(normals)
+    tangents = np.stack(perpendiculars(normals), axis=1)  # (faces, 2, 3)
     F_mm = np.zeros((9, 9))
     F_mf = np.zeros((n_faces, 9, 3))
     F_ff = np.zeros((n_faces, 3, 3))
@@ -100,12 +101,3 @@ def dense_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
         "points": len(xyz),
         "faces": int(np.count_nonzero(np.any(F_ff != 0, axis=(1, 2)))),
     }
-
-
-def _tangents(normals: FloatArray) -> FloatArray:
-    """Two unit vectors across each normal, ``(faces, 2, 3)``."""
-    helper = np.where(np.abs(normals[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = np.cross(normals, helper)
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
-    e2 = np.cross(normals, e1)
-    return np.stack([e1, e2], axis=1)

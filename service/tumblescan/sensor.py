@@ -45,16 +45,20 @@ class SensorNoise(BaseModel):
         """Add range noise along and angle noise across each point's line of sight."""
         rho = np.linalg.norm(points_m, axis=-1)
         u = points_m / rho[:, None]
-        # Two unit vectors across the line of sight.
-        helper = np.where(np.abs(u[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-        e1 = np.cross(u, helper)
-        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-        e2 = np.cross(u, e1)
+        e1, e2 = perpendiculars(u)
         n = len(points_m)
         d_rho = rng.normal(0.0, self.range_sigma_m, n)
         d_a = rng.normal(0.0, self.angle_sigma_rad, (n, 2)) * rho[:, None]
         noisy = points_m + u * d_rho[:, None] + e1 * d_a[:, [0]] + e2 * d_a[:, [1]]
         return np.asarray(noisy, dtype=float)
+
+
+def perpendiculars(u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two unit vectors across each unit vector ``u`` (rows), completing a right-handed basis."""
+    helper = np.where(np.abs(u[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(u, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(u, e1)
 
 
 class Scanner(BaseModel):

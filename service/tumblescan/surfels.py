@@ -32,6 +32,9 @@ MAX_THICKNESS_SIGMAS = 2.5
 MIN_SURFEL_POINTS = 6
 # Neighbouring cells of one surface differ in range by less than this many surfel sizes.
 MAX_RANGE_STEP = 4.0
+# The 8 cells around a cell, (azimuth, elevation) steps; the 4 that share a side with it.
+NEIGHBOUR_OFFSETS = tuple((da, de) for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de)
+SIDE_NEIGHBOURS = tuple(k for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if da == 0 or de == 0)
 # A surfel's normal pools the planar cells of every frame within this many surfel sizes (at T)
 # whose own normals agree within this angle.
 SHARED_RADIUS = 1.5
@@ -103,6 +106,7 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
     key = (f * dims[0] + a + 1) * dims[1] + e + 1
     keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
     rho = np.bincount(cell, range_m) / np.bincount(cell)
+    neighbours = _view_neighbours(keys, dims[1])
     return DenseData(
         np.asarray(xyz_m, dtype=float),
         f,
@@ -113,32 +117,30 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
         int(f.max()) + 1,
         surfel_m,
         float(np.linalg.norm(np.ptp(xyz_m, axis=0))),
-        _interior(keys, rho, dims[1], max_step_m=MAX_RANGE_STEP * surfel_m),
-        _view_neighbours(keys, dims[1]),
+        _interior(neighbours, rho, max_step_m=MAX_RANGE_STEP * surfel_m),
+        neighbours,
     )
 
 
 def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
-    """Index of the 8 cells around each cell of a frame's view, ``-1`` where none was hit."""
+    """Index of the 8 cells around each cell of a frame's view, ``-1`` where none was hit;
+    column ``k`` is the offset ``NEIGHBOUR_OFFSETS[k]`` in (azimuth, elevation) cells."""
     out = np.full((len(keys), 8), -1, dtype=np.int64)
-    offsets = [da * stride + de for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de]
-    for k, offset in enumerate(offsets):
+    for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS):
+        offset = da * stride + de
         nb = keys + offset
         pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
         out[:, k] = np.where(keys[pos] == nb, pos, -1)
     return out
 
 
-def _interior(keys: IntArray, rho_m: FloatArray, stride: int, *, max_step_m: float) -> NDArray[np.bool_]:
+def _interior(neighbours: IntArray, rho_m: FloatArray, *, max_step_m: float) -> NDArray[np.bool_]:
     """Cells whose 4 neighbours in the view were hit too, at nearly the same range: not on the
     edge of the field of view, of the target's silhouette or of an occlusion, where a partner
     frame sees a different part of the scene and a match would land on the wrong surface."""
-    ok = np.ones(len(keys), bool)
-    for offset in (-stride, stride, -1, 1):
-        nb = keys + offset
-        pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
-        ok &= (keys[pos] == nb) & (np.abs(rho_m[pos] - rho_m) <= max_step_m)
-    return ok
+    side = neighbours[:, list(SIDE_NEIGHBOURS)]
+    near = np.abs(rho_m[np.maximum(side, 0)] - rho_m[:, None]) <= max_step_m
+    return np.asarray(np.all((side >= 0) & near, axis=1))
 
 
 class LineMapping:
@@ -321,14 +323,14 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     # turns): the normal is taken from the scatter less the noise's covariance, which lies
     # along the ray and depends on the normal (:func:`_noise_cov`): start from the raw
     # scatter's normal and refine.
-    normal_ref = np.linalg.eigh(cov)[1][:, :, 0]
+    w, V = np.linalg.eigh(cov)
+    normal_ref = V[:, :, 0]
     for _ in range(NOISE_COV_PASSES):
         normal_obs = np.einsum("nji,nj->ni", Rt, normal_ref)
         noise_ref = np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs, normal_obs), Rt)
         normal_ref = np.linalg.eigh(cov - noise_ref)[1][:, :, 0]
     normal_obs = _facing_sensor(np.einsum("nji,nj->ni", Rt, normal_ref), anchor_obs)
     var = normal_variance(noise, anchor_obs, normal_obs)
-    w = np.asarray(np.linalg.eigvalsh(cov), dtype=float)
     planar = _planar(w, var, count) & data.interior & _inside_face(data, normal_obs, count)
     spread = count * np.maximum(w[:, 1], 0.0)
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
