@@ -87,7 +87,8 @@ class DenseFit:
 
     rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
     source or target); residuals: residuals used; surfels: distinct source surfels; points:
-    the points in them.
+    the points in them; scale: the common scale ``s`` of the residuals' model sigmas (about 1
+    when the motion fits; a wrong motion leaves residuals many times their model sigma).
     """
 
     x: FloatArray
@@ -99,6 +100,7 @@ class DenseFit:
     surfels: int
     points: int
     iterations: int
+    scale: float
 
     @property
     def spin_only(self) -> bool:
@@ -453,6 +455,7 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps:
         surfels=len(sources),
         points=int(surf.count[sources].sum()),
         iterations=steps,
+        scale=scale,
     )
 
 

@@ -1,12 +1,15 @@
 """Motion from dense line-scan frames, without feature tracks.
 
 Recipe:
-1. Register consecutive frames rigidly (FPFH + RANSAC + ICP) and drop pairs whose rotation
-   disagrees with the rest (a symmetric target can register onto a turned copy of itself).
-2. Initialize by the closed-form cone (method.md section 5) on those transforms; re-time each
-   frame to its mean time with that motion, register again by ICP from the predicted
-   transforms, and fit the cone once more.
+1. Register consecutive frames rigidly (FPFH + RANSAC + ICP); keep the pairs one cone motion
+   explains (:mod:`tumblescan.consensus`: a symmetric target can register onto a turned copy
+   of itself, a fast one often does).
+2. Re-time each frame to its mean time with that motion, register again by ICP (from the
+   predicted transform where a pair disagreed), and form the consensus again.
 3. Refine all 9 parameters by the dense continuous-time fit on every point (:mod:`tumblescan.dense`).
+   If the fit is poor (residuals many times their model sigma, or frames unmatched), or no
+   3 pairs agreed, start again from a particle swarm on a dense alignment cost
+   (:mod:`tumblescan.dense_search`) and keep the better fit.
 4. Choose the model: keep spin-precession unless the precession rate is not significantly
    different from 0 (Wald test at ``significance``); then refit spin-only.
 5. Validate (paper eq. 11): polish the motion on the first frames only and compare.
@@ -24,13 +27,15 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
+from .consensus import INLIER_RAD, Consensus, cone_consensus, pair_misfit
 from .dense import DenseFit, refine_dense
+from .dense_search import VOXEL_FRACTIONS, OverlapCost, swarm_start
 from .errors import InputError
 from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
 from .frames import Frames
-from .initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
-from .motion import rotate
-from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
+from .initializer import InitialGuess, InitializerError
+from .motion import rotate, rotation_matrices
+from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .result import MotionResult
 from .sensor import SensorNoise
 from .surfels import DenseData, prepare
@@ -43,6 +48,8 @@ Progress = Callable[[str, float], None]
 REGISTRATION_POINTS = 60_000
 RETIME_PASSES = 2
 SURFEL_FRACTION = 1 / 100
+# A refined motion whose residuals are this many times their model sigma is wrong.
+POOR_SCALE = 3.0
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
@@ -56,6 +63,7 @@ class _Solve:
     fit: DenseFit
     initial: InitialGuess
     pairs_used: int
+    path: str
 
 
 def estimate_from_frames(
@@ -80,7 +88,7 @@ def estimate_from_frames(
         As for tracks; ``fit.source`` is ``frames`` and ``fit.frame_rms_m`` gives each
         frame's centroid-to-plane residual.
     """
-    report = progress or (lambda stage, fraction: None)
+    report = _never_backwards(progress or (lambda stage, fraction: None))
     with threadpool_limits(1, user_api="blas"):
         return _estimate(frames, options or EstimateOptions(), report)
 
@@ -103,7 +111,25 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     progress("registering", 0.0)
     voxel = max(extent * VOXEL_FRACTION, 1e-3)
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
-    main = _solve(data, reg, global_pairs, voxel, opts, noise, progress, warnings, spin_only=opts.model == "spin-only")
+    mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
+    spin_only = opts.model == "spin-only"
+    main: _Solve | None = None
+    try:
+        start = _consensus(global_pairs, mid, opts.seed)
+        main = _solve(data, reg, global_pairs, start, voxel, opts, noise, progress, warnings, spin_only=spin_only)
+        poor = _poor_fit(main.fit)
+    except FramesUnusableError as exc:
+        poor = str(exc)
+    # 2b. When the registrations' motion fits poorly, search with the swarm on the dense cost.
+    if poor is not None:
+        progress("initializing", 0.05)
+        alt = _search(data, reg, global_pairs, mid, extent, voxel, opts, noise, progress, warnings, spin_only, poor)
+        if main is None or alt.fit.scale < main.fit.scale:
+            main = alt
+    assert main is not None
+    still_poor = _poor_fit(main.fit)
+    if still_poor is not None:
+        warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
     fit = main.fit
     # 4. Model choice.
     if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
@@ -125,6 +151,19 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
         )
     progress("estimated", 1.0)
     return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+
+
+def _never_backwards(progress: Progress) -> Progress:
+    """``progress`` with the fraction held at its maximum so far: the swarm's fallback repeats
+    the registering and refining stages, and a progress bar should not run back."""
+    most = 0.0
+
+    def report(stage: str, fraction: float) -> None:
+        nonlocal most
+        most = max(most, fraction)
+        progress(stage, most)
+
+    return report
 
 
 @dataclass(frozen=True)
@@ -159,48 +198,62 @@ def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> Flo
 
 
 def _retimed(
-    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms
+    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms, start: Consensus
 ) -> FloatArray:
-    """Points moved to their frame's mean time, rotating about the transforms' common fixed point
-    at the mean angular velocity of the consistent pairs just before and after each frame."""
-    ok = consistent_pairs(pairs)
-    rotvec = Rotation.from_matrix(pairs.R).as_rotvec() / np.diff(mid)[:, None]
+    """Points moved to their frame's mean time, rotating about the hypothesis's centre at the mean
+    angular velocity of the pairs just before and after each frame (registered where the pair
+    agrees with the hypothesis, predicted by it where not)."""
+    R = np.where(start.inliers[:, None, None], pairs.R, _predicted(start.guess.x, mid).R)
+    rotvec = Rotation.from_matrix(R).as_rotvec() / np.diff(mid)[:, None]
     omega = np.empty((len(mid), 3))
     for f in range(len(mid)):
-        near = [k for k in (f - 1, f) if 0 <= k < len(ok) and ok[k]]
-        omega[f] = rotvec[near].mean(axis=0) if near else np.median(rotvec[ok], axis=0)
-    center = center_from_transforms(pairs.R[ok], pairs.t[ok])
+        near = [k for k in (f - 1, f) if 0 <= k < len(rotvec)]
+        omega[f] = rotvec[near].mean(axis=0)
+    center = start.guess.x[6:9]
     w = omega[frame]
     rate = np.linalg.norm(w, axis=1)
     axis = w / np.maximum(rate, 1e-300)[:, None]
     return np.asarray(center + rotate(axis, rate * (mid[frame] - tau), xyz - center), dtype=float)
 
 
-def _initial(pairs: PairTransforms, mid: FloatArray, n_frames: int, warnings: list[str]) -> tuple[InitialGuess, int]:
-    ok = consistent_pairs(pairs)
-    k = np.flatnonzero(ok)
-    if len(k) < 3:
-        raise FramesUnusableError(
-            f"only {len(k)} of {len(ok)} consecutive frame pairs could be registered consistently; the initial "
-            "motion needs 3 (do the frames overlap, and is the target rotating less than ~90 degrees per frame?)",
-            field="file",
-        )
-    if len(k) < len(ok):
-        warnings.append(
-            f"{len(ok) - len(k)} of {len(ok)} frame pairs registered inconsistently (a symmetric target can match a "
-            "turned copy of itself); the initial motion used the others"
-        )
+def _predicted(x: FloatArray, mid: FloatArray) -> PairTransforms:
+    """The transforms between consecutive frames' mean times that motion ``x`` predicts."""
+    R = rotation_matrices(x, mid)
+    Q = R[1:] @ np.swapaxes(R[:-1], 1, 2)
+    center = x[6:9]
+    n = len(Q)
+    return PairTransforms(Q, center - Q @ center, np.zeros(n), np.zeros(n))
+
+
+def _registration_start(pairs: PairTransforms, start: Consensus, mid: FloatArray) -> PairTransforms:
+    """ICP starts: the registered transform where the pair agrees with the hypothesis, the
+    predicted one where it does not (a pair registered onto a turned copy gets another chance)."""
+    predicted = _predicted(start.guess.x, mid)
+    keep = start.inliers
+    return PairTransforms(
+        np.where(keep[:, None, None], pairs.R, predicted.R),
+        np.where(keep[:, None], pairs.t, predicted.t),
+        pairs.fitness,
+        pairs.rmse_m,
+    )
+
+
+def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> Consensus:
     try:
-        guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
+        return cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
     except InitializerError as exc:
-        raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
-    return guess, len(k)
+        raise FramesUnusableError(
+            f"the initial motion could not be formed from the registered frame pairs: {exc} (do the frames "
+            "overlap, and is the target rotating less than ~90 degrees per frame?)",
+            field="file",
+        ) from None
 
 
 def _solve(
     data: DenseData,
     reg: _RegistrationPoints,
     pairs: PairTransforms,
+    start: Consensus,
     voxel_m: float,
     opts: EstimateOptions,
     noise: SensorNoise,
@@ -208,17 +261,27 @@ def _solve(
     warnings: list[str],
     *,
     spin_only: bool,
+    path: str = "registration+cone+dense",
 ) -> _Solve:
-    """Re-time and register again, initialize on the transforms, refine on every point."""
+    """From a motion most pairs agree with: re-time and register again, refine on every point."""
     n = data.n_frames
     mid = _frame_taus(reg.tau_s, reg.frame, n)
-    # Re-timed registration passes: the in-frame smear no longer biases the rotations.
+    # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
+    # registered onto a turned copy of the target restart from the predicted transform.
     for p in range(RETIME_PASSES):
         progress("registering", 0.1 * (p + 1) / RETIME_PASSES)
-        xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs)
-        pairs = register_consecutive(reg.split(xyz, n), voxel_m=voxel_m, initial=pairs, seed=opts.seed)
+        xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
+        initial = _registration_start(pairs, start, mid)
+        pairs = register_consecutive(reg.split(xyz, n), voxel_m=voxel_m, initial=initial, seed=opts.seed)
+        start = _consensus(pairs, mid, opts.seed)
     progress("initializing", 0.1)
-    guess, used = _initial(pairs, mid, n, warnings)
+    used = int(start.inliers.sum())
+    if used < len(start.inliers):
+        warnings.append(
+            f"{len(start.inliers) - used} of {len(start.inliers)} frame pairs registered inconsistently with the "
+            "others (a symmetric target can match a turned copy of itself); the initial motion used the others"
+        )
+    guess = start.guess
     progress("refining", 0.15)
 
     def on_step(step: int, total: int) -> None:
@@ -233,7 +296,73 @@ def _solve(
         seed=opts.seed,
         on_iteration=on_step,
     )
-    return _Solve(fit, guess, used)
+    return _Solve(fit, guess, used, path)
+
+
+def _poor_fit(fit: DenseFit) -> str | None:
+    """Why the refined motion cannot be right, or None: residuals many times their model sigma,
+    or frames left without a single match."""
+    if not fit.scale <= POOR_SCALE:
+        return f"residuals {fit.scale:.1f} times their expected size"
+    unmatched = int(np.sum(~np.isfinite(fit.frame_rms_m)))
+    if unmatched:
+        return f"{unmatched} of {len(fit.frame_rms_m)} frames without a match"
+    return None
+
+
+def _search(
+    data: DenseData,
+    reg: _RegistrationPoints,
+    pairs: PairTransforms,
+    mid: FloatArray,
+    extent: float,
+    voxel_m: float,
+    opts: EstimateOptions,
+    noise: SensorNoise,
+    progress: Progress,
+    warnings: list[str],
+    spin_only: bool,
+    why: str,
+) -> _Solve:
+    """The swarm's start (:mod:`tumblescan.dense_search`), then the same passes as the cone's."""
+    cost = OverlapCost(
+        reg.xyz_m,
+        reg.tau_s,
+        reg.frame,
+        data.n_frames,
+        voxel_m=tuple(extent * f for f in VOXEL_FRACTIONS),
+        rng=np.random.default_rng(opts.seed),
+    )
+    try:
+        found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=opts.seed)
+    except ValueError as exc:
+        raise FramesUnusableError(f"{why}; the swarm found no start either: {exc}", field="file") from None
+    misfit = pair_misfit(found.x, pairs.R, mid[:-1], mid[1:])
+    start = Consensus(
+        guess=InitialGuess(x=found.x, x_spin_only=_without_precession(found.x), cone_collapsed=False, passes=1),
+        inliers=misfit < INLIER_RAD,
+        misfit_rad=misfit,
+    )
+    warnings.append(f"the registered frame pairs gave a poor motion ({why}); started from a particle swarm instead")
+    return _solve(
+        data,
+        reg,
+        pairs,
+        start,
+        voxel_m,
+        opts,
+        noise,
+        progress,
+        warnings,
+        spin_only=spin_only,
+        path="registration+swarm+dense",
+    )
+
+
+def _without_precession(x: FloatArray) -> FloatArray:
+    out = x.copy()
+    out[3:6] = 0.0
+    return out
 
 
 def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: list[str]) -> bool:
@@ -304,7 +433,7 @@ def _result(
             },
             "validation": validation_fields(check, frames.n_frames, n2),
             "solver": {
-                "path": f"registration+cone+dense ({main.pairs_used} frame pairs)",
+                "path": f"{main.path} ({main.pairs_used} frame pairs)",
                 "iterations": fit.iterations,
                 "attempts": 1,
                 "elapsed_s": elapsed_s,

@@ -47,6 +47,8 @@ from .tracks import Tracks
 FloatArray = NDArray[np.float64]
 Variant = Literal["pso", "tvac", "apso", "naiwpso"]
 VARIANTS: tuple[Variant, ...] = ("pso", "tvac", "apso", "naiwpso")
+# Azimuths of the two axes wrap around; every other dimension reflects at its bounds.
+PERIODIC = (0, 3)
 
 
 class SwarmConfig(BaseModel):
@@ -111,17 +113,41 @@ def swarm_search(
     *,
     on_iteration: Callable[[int], None] | None = None,
 ) -> SwarmResult:
-    """Run the configured swarm variant; see the module docstring for the update rules.
+    """Run the configured swarm variant on the pairwise track cost; see the module docstring.
     ``on_iteration(i)`` is called after each iteration (it may raise to stop the search)."""
     fitness = PairwiseFitness(tracks, reference_time_s)
     lo, hi = _bounds(config)
+    best, best_cost, history = particle_swarm(
+        lambda pos: fitness(pos)[0], lo, hi, config, rng, on_iteration=on_iteration
+    )
+    _, center = fitness(best[None, :])
+    x = np.concatenate([best, center[0]])
+    assert x.shape == (N_PARAMS,)
+    return SwarmResult(x=x, cost=best_cost, history=history)
+
+
+def particle_swarm(
+    cost_of: Callable[[FloatArray], FloatArray],
+    lo: FloatArray,
+    hi: FloatArray,
+    config: SwarmConfig,
+    rng: np.random.Generator,
+    *,
+    start: FloatArray | None = None,
+    on_iteration: Callable[[int], None] | None = None,
+) -> tuple[FloatArray, float, FloatArray]:
+    """Minimize ``cost_of(positions (k, d)) -> (k,)`` within ``[lo, hi]``: best position, its cost,
+    and the best cost after each iteration. Dimensions 0 and 3 are azimuths (periodic), 1 and 4
+    polar angles; the first ``len(start)`` particles start at the rows of ``start``, the others
+    with axes uniform on the sphere and every other dimension uniform in its bounds."""
     span = hi - lo
     k, dims = config.particles, len(lo)
-    # Axes uniform on the sphere, rates uniform in their bounds.
     pos = lo + rng.random((k, dims)) * span
     pos[:, [1, 4]] = np.arccos(rng.uniform(-1, 1, (k, 2)))
+    if start is not None:
+        pos[: len(start)] = start[:k]
     vel = (rng.random((k, dims)) - 0.5) * 0.2 * span
-    cost, _ = fitness(pos)
+    cost = cost_of(pos)
     pbest, pbest_cost = pos.copy(), cost.copy()
     g = int(np.argmin(cost))
     c1, c2 = (1.49445, 1.49445) if config.variant == "naiwpso" else (2.0, 2.0)
@@ -142,7 +168,7 @@ def swarm_search(
         vel = np.clip(vel, -0.2 * span, 0.2 * span)
         pos, vel = _keep_in_bounds(pos + vel, vel, lo, hi)
         # Evaluate and update the memories.
-        cost, _ = fitness(pos)
+        cost = cost_of(pos)
         if config.variant == "naiwpso":
             w = float(np.mean(cost < pbest_cost[g]))
         better = cost < pbest_cost
@@ -151,10 +177,7 @@ def swarm_search(
         history[it] = pbest_cost[g]
         if on_iteration is not None:
             on_iteration(it)
-    best_cost, center = fitness(pbest[g][None, :])
-    x = np.concatenate([pbest[g], center[0]])
-    assert x.shape == (N_PARAMS,)
-    return SwarmResult(x=x, cost=float(best_cost[0]), history=history)
+    return pbest[g], float(pbest_cost[g]), history
 
 
 def _bounds(config: SwarmConfig) -> tuple[FloatArray, FloatArray]:
@@ -167,9 +190,9 @@ def _bounds(config: SwarmConfig) -> tuple[FloatArray, FloatArray]:
 
 def _keep_in_bounds(pos: FloatArray, vel: FloatArray, lo: FloatArray, hi: FloatArray) -> tuple[FloatArray, FloatArray]:
     span = hi - lo
-    for d in (0, 3):  # azimuths are periodic
+    for d in PERIODIC:
         pos[:, d] = lo[d] + np.mod(pos[:, d] - lo[d], span[d])
-    for d in (1, 2, 4, 5):  # polar angles and rates reflect
+    for d in (d for d in range(len(lo)) if d not in PERIODIC):  # the others reflect
         below, above = pos[:, d] < lo[d], pos[:, d] > hi[d]
         pos[below, d] = 2 * lo[d] - pos[below, d]
         pos[above, d] = 2 * hi[d] - pos[above, d]
