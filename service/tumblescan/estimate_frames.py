@@ -33,9 +33,9 @@ from .dense_search import VOXEL_FRACTIONS, OverlapCost, swarm_start
 from .errors import InputError
 from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
 from .frames import Frames
-from .initializer import InitialGuess, InitializerError
+from .initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
 from .motion import rotate, rotation_matrices
-from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
+from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
 from .result import MotionResult
 from .sensor import SensorNoise
 from .surfels import DenseData, prepare
@@ -114,18 +114,46 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
     spin_only = opts.model == "spin-only"
     main: _Solve | None = None
-    try:
-        start = _consensus(global_pairs, mid, opts.seed)
-        main = _solve(data, reg, global_pairs, start, voxel, opts, noise, progress, warnings, spin_only=spin_only)
-        poor = _poor_fit(main.fit)
-    except FramesUnusableError as exc:
-        poor = str(exc)
-    # 2b. When the registrations' motion fits poorly, search with the swarm on the dense cost.
-    if poor is not None:
-        progress("initializing", 0.05)
-        alt = _search(data, reg, global_pairs, mid, extent, voxel, opts, noise, progress, warnings, spin_only, poor)
+    # 2a. The vote on rotation angles, then, if its motion fits poorly, the consensus over
+    # triplets of pairs, then the swarm on the dense cost; the best fit is kept.
+    attempts = (
+        (lambda: _vote(global_pairs, mid, opts.seed), "registration+cone+dense"),
+        (lambda: _consensus(global_pairs, mid, opts.seed), "registration+consensus+dense"),
+        (lambda: _swarm(data, reg, global_pairs, mid, extent, opts), "registration+swarm+dense"),
+    )
+    tried: list[str] = []
+    for begin, path in attempts:
+        if tried:
+            progress("initializing", 0.05)
+        attempt_warnings: list[str] = []
+        try:
+            alt = _solve(
+                data,
+                reg,
+                global_pairs,
+                begin(),
+                voxel,
+                opts,
+                noise,
+                progress,
+                attempt_warnings,
+                spin_only=spin_only,
+                path=path,
+            )
+        except FramesUnusableError as exc:
+            tried.append(f"{path}: {exc}")
+            continue
         if main is None or alt.fit.scale < main.fit.scale:
-            main = alt
+            main, kept = alt, attempt_warnings
+        poor = _poor_fit(alt.fit)
+        if poor is None:
+            break
+        tried.append(f"{path}: {poor}")
+    if main is None:
+        raise FramesUnusableError("no start for the motion was found: " + "; ".join(tried), field="file")
+    warnings += kept
+    if tried and main.path != attempts[0][1]:
+        warnings.append("the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}")
     assert main is not None
     still_poor = _poor_fit(main.fit)
     if still_poor is not None:
@@ -198,18 +226,20 @@ def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> Flo
 
 
 def _retimed(
-    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms, start: Consensus
+    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms, start: _Start
 ) -> FloatArray:
-    """Points moved to their frame's mean time, rotating about the hypothesis's centre at the mean
-    angular velocity of the pairs just before and after each frame (registered where the pair
-    agrees with the hypothesis, predicted by it where not)."""
-    R = np.where(start.inliers[:, None, None], pairs.R, _predicted(start.guess.x, mid).R)
+    """Points moved to their frame's mean time, rotating at the mean angular velocity of the pairs
+    just before and after each frame. Voted start: the inlier pairs only (their median for a
+    frame with none), about their common fixed point. Otherwise: registered where the pair
+    agrees with the hypothesis, predicted by it where not, about the hypothesis's centre."""
+    ok = start.inliers
+    R = pairs.R if start.voted else np.where(ok[:, None, None], pairs.R, _predicted(start.guess.x, mid).R)
     rotvec = Rotation.from_matrix(R).as_rotvec() / np.diff(mid)[:, None]
     omega = np.empty((len(mid), 3))
     for f in range(len(mid)):
-        near = [k for k in (f - 1, f) if 0 <= k < len(rotvec)]
-        omega[f] = rotvec[near].mean(axis=0)
-    center = start.guess.x[6:9]
+        near = [k for k in (f - 1, f) if 0 <= k < len(rotvec) and (ok[k] or not start.voted)]
+        omega[f] = rotvec[near].mean(axis=0) if near else np.median(rotvec[ok], axis=0)
+    center = center_from_transforms(pairs.R[ok], pairs.t[ok]) if start.voted else start.guess.x[6:9]
     w = omega[frame]
     rate = np.linalg.norm(w, axis=1)
     axis = w / np.maximum(rate, 1e-300)[:, None]
@@ -225,9 +255,12 @@ def _predicted(x: FloatArray, mid: FloatArray) -> PairTransforms:
     return PairTransforms(Q, center - Q @ center, np.zeros(n), np.zeros(n))
 
 
-def _registration_start(pairs: PairTransforms, start: Consensus, mid: FloatArray) -> PairTransforms:
-    """ICP starts: the registered transform where the pair agrees with the hypothesis, the
-    predicted one where it does not (a pair registered onto a turned copy gets another chance)."""
+def _registration_start(pairs: PairTransforms, start: _Start, mid: FloatArray) -> PairTransforms:
+    """ICP starts: the registered transform where the pair agrees with the hypothesis (or for
+    every pair after a vote), the predicted one where it does not (a pair registered onto a
+    turned copy gets another chance)."""
+    if start.voted:
+        return pairs
     predicted = _predicted(start.guess.x, mid)
     keep = start.inliers
     return PairTransforms(
@@ -238,9 +271,35 @@ def _registration_start(pairs: PairTransforms, start: Consensus, mid: FloatArray
     )
 
 
-def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> Consensus:
+@dataclass(frozen=True)
+class _Start(Consensus):
+    """A starting motion and its inlier pairs; ``voted``: chosen by the vote on rotation angles."""
+
+    voted: bool = False
+
+
+def _vote(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
+    """The cone on the pairs whose rotation angle is near the median (every pair of the cone
+    has the same angle): the path measured on the paper's grid."""
+    ok = consistent_pairs(pairs)
+    k = np.flatnonzero(ok)
+    if len(k) < 3:
+        raise FramesUnusableError(
+            f"only {len(k)} of {len(ok)} consecutive frame pairs could be registered consistently; the initial "
+            "motion needs 3 (do the frames overlap, and is the target rotating less than ~90 degrees per frame?)",
+            field="file",
+        )
     try:
-        return cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
+        guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
+    except InitializerError as exc:
+        raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
+    return _Start(guess=guess, inliers=ok, misfit_rad=np.full(len(ok), np.nan), voted=True)
+
+
+def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
+    try:
+        found = cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
+        return _Start(guess=found.guess, inliers=found.inliers, misfit_rad=found.misfit_rad)
     except InitializerError as exc:
         raise FramesUnusableError(
             f"the initial motion could not be formed from the registered frame pairs: {exc} (do the frames "
@@ -253,7 +312,7 @@ def _solve(
     data: DenseData,
     reg: _RegistrationPoints,
     pairs: PairTransforms,
-    start: Consensus,
+    start: _Start,
     voxel_m: float,
     opts: EstimateOptions,
     noise: SensorNoise,
@@ -273,7 +332,7 @@ def _solve(
         xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
         initial = _registration_start(pairs, start, mid)
         pairs = register_consecutive(reg.split(xyz, n), voxel_m=voxel_m, initial=initial, seed=opts.seed)
-        start = _consensus(pairs, mid, opts.seed)
+        start = _vote(pairs, mid, opts.seed) if start.voted else _consensus(pairs, mid, opts.seed)
     progress("initializing", 0.1)
     used = int(start.inliers.sum())
     if used < len(start.inliers):
@@ -310,21 +369,15 @@ def _poor_fit(fit: DenseFit) -> str | None:
     return None
 
 
-def _search(
+def _swarm(
     data: DenseData,
     reg: _RegistrationPoints,
     pairs: PairTransforms,
     mid: FloatArray,
     extent: float,
-    voxel_m: float,
     opts: EstimateOptions,
-    noise: SensorNoise,
-    progress: Progress,
-    warnings: list[str],
-    spin_only: bool,
-    why: str,
-) -> _Solve:
-    """The swarm's start (:mod:`tumblescan.dense_search`), then the same passes as the cone's."""
+) -> _Start:
+    """The swarm's start (:mod:`tumblescan.dense_search`) and the pairs that agree with it."""
     cost = OverlapCost(
         reg.xyz_m,
         reg.tau_s,
@@ -336,26 +389,12 @@ def _search(
     try:
         found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=opts.seed)
     except ValueError as exc:
-        raise FramesUnusableError(f"{why}; the swarm found no start either: {exc}", field="file") from None
+        raise FramesUnusableError(f"the swarm found no start: {exc}", field="file") from None
     misfit = pair_misfit(found.x, pairs.R, mid[:-1], mid[1:])
-    start = Consensus(
+    return _Start(
         guess=InitialGuess(x=found.x, x_spin_only=_without_precession(found.x), cone_collapsed=False, passes=1),
         inliers=misfit < INLIER_RAD,
         misfit_rad=misfit,
-    )
-    warnings.append(f"the registered frame pairs gave a poor motion ({why}); started from a particle swarm instead")
-    return _solve(
-        data,
-        reg,
-        pairs,
-        start,
-        voxel_m,
-        opts,
-        noise,
-        progress,
-        warnings,
-        spin_only=spin_only,
-        path="registration+swarm+dense",
     )
 
 

@@ -7,8 +7,10 @@ ICP. Later passes skip RANSAC and start ICP from the transform the current motio
 after each frame has been re-timed to its mean time (so the in-frame smear is gone).
 
 The target may be symmetric (a box with two equal panels is, under 180 degree turns): a
-global registration can then return the true rotation composed with a symmetry. Which pairs
-one motion explains is decided by :mod:`tumblescan.consensus`.
+global registration can then return the true rotation composed with a symmetry. Such pairs
+usually show as rotation angles far from the others' (the cone's rotation angle is the same
+for every pair) and are refused by :func:`consistent_pairs`; when they are the majority (a
+fast symmetric tumbler), :mod:`tumblescan.consensus` finds the pairs one motion explains.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ FloatArray = NDArray[np.float64]
 
 # Voxel size as a fraction of the target's extent (its bounding-box diagonal in the first frame).
 VOXEL_FRACTION = 1 / 60
+# A pair whose rotation angle differs from the median by more than this is inconsistent.
+MAX_ANGLE_DEVIATION_RAD = np.radians(10.0)
 RANSAC_ITERATIONS = 100_000
 RANSAC_CONFIDENCE = 0.999
 ICP_ITERATIONS = 50
@@ -85,6 +89,12 @@ def register_consecutive(
         fit.append(icp.fitness)
         rmse.append(icp.inlier_rmse)
     return PairTransforms(np.array(Rs), np.array(ts), np.array(fit), np.array(rmse))
+
+
+def consistent_pairs(pairs: PairTransforms) -> NDArray[np.bool_]:
+    """Pairs whose rotation angle is near the median angle (see the module docstring)."""
+    angles = np.arccos(np.clip((np.trace(pairs.R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0))
+    return np.asarray(np.abs(angles - np.median(angles)) <= MAX_ANGLE_DEVIATION_RAD)
 
 
 def _prepare(xyz: FloatArray, voxel_m: float, *, features: bool) -> tuple[o3d.geometry.PointCloud, Any]:
