@@ -4,6 +4,8 @@ on the dense cost finds the motion when too few pairs registered right."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -21,7 +23,7 @@ from tumblescan import (
     simulate_frames,
 )
 from tumblescan.consensus import cone_consensus
-from tumblescan.dense_search import VOXEL_FRACTIONS, OverlapCost, swarm_start
+from tumblescan.dense_search import OverlapCost, swarm_start
 from tumblescan.initializer import InitializerError
 from tumblescan.motion import canonical_params, rotation_matrices
 from tumblescan.registration import extent_m
@@ -37,13 +39,15 @@ MOTION = Motion.from_degrees(
 MID_S = np.arange(15, dtype=np.float64) + 0.25
 
 
-def _pairs(motion: Motion, turned: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Transforms between consecutive mean times; the pairs in ``turned`` registered onto the
-    target turned by 180 degrees about one of its body axes (as a symmetric target allows)."""
+def _pairs(
+    motion: Motion, turned: list[int], mid_s: np.ndarray = MID_S, seed: int = 3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Transforms between consecutive mean times ``mid_s``; the pairs in ``turned`` registered onto
+    the target turned by 180 degrees about one of its body axes (as a symmetric target allows)."""
     x = motion.params()
-    R = rotation_matrices(x, MID_S)
+    R = rotation_matrices(x, mid_s)
     Q = R[1:] @ np.swapaxes(R[:-1], 1, 2)
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     for k in turned:
         body_axis = np.eye(3)[rng.integers(3)]
         S = Rotation.from_rotvec(np.pi * (R[k] @ body_axis)).as_matrix()
@@ -77,63 +81,47 @@ def test_consensus_refuses_when_no_three_pairs_agree() -> None:
         cone_consensus(Rs, ts, MID_S[:-1], MID_S[1:], 0.0, inlier_rad=np.radians(0.01))
 
 
+@dataclass(frozen=True)
+class Fast:
+    """Frames of a 62 deg/s spin (each 1 s frame turns the target by ~75 degrees, ~35 while it is
+    scanned), each point's offset from the reference time, each frame's mean offset, and the
+    dense cost with its default voxels."""
+
+    frames: Frames
+    tau_s: np.ndarray
+    mid_s: np.ndarray
+    extent_m: float
+    cost: OverlapCost
+
+
 @pytest.fixture(scope="module")
-def fast() -> tuple[Motion, FrameCloud]:
-    """A 62 deg/s spin: each 1 s frame turns the target by ~75 degrees, ~35 while it is scanned."""
-    scene = Scene(scanner=Scanner(lines=128, pixels=128))
-    return MOTION, simulate_frames(MOTION, scene, seed=4)
-
-
-def test_dense_cost_is_lowest_at_the_true_motion(fast: tuple[Motion, FrameCloud]) -> None:
-    motion, sim = fast
+def fast() -> Fast:
+    sim = simulate_frames(MOTION, Scene(scanner=Scanner(lines=128, pixels=128)), seed=4)
     frames = assemble_frames_of(sim)
-    tau = frames.cloud.t_s - motion.reference_time_s
-    per_frame = [frames.cloud.xyz_m[frames.frame == f] for f in range(frames.n_frames)]
-    extent = extent_m(per_frame)
-    cost = OverlapCost(
-        frames.cloud.xyz_m,
-        tau,
-        frames.frame,
-        frames.n_frames,
-        voxel_m=tuple(extent * f for f in VOXEL_FRACTIONS),
-        rng=np.random.default_rng(0),
-    )
-    x = motion.params()
+    tau = frames.cloud.t_s - MOTION.reference_time_s
+    mid = np.array([tau[frames.frame == f].mean() for f in range(frames.n_frames)])
+    extent = extent_m([frames.cloud.xyz_m[frames.frame == f] for f in range(frames.n_frames)])
+    cost = OverlapCost.for_extent(frames.cloud.xyz_m, tau, frames.frame, frames.n_frames, extent_m=extent, seed=0)
+    return Fast(frames, tau, mid, extent, cost)
+
+
+def test_dense_cost_is_lowest_at_the_true_motion(fast: Fast) -> None:
+    x = MOTION.params()
     wrong = np.tile(x, (4, 1))
     wrong[0, 2] += np.radians(3.0)  # spin rate 3 deg/s off
     wrong[1, 5] += np.radians(3.0)  # precession rate
     wrong[2, 0] += np.radians(5.0)  # spin axis azimuth
     wrong[3, 8] += 1.0  # centre 1 m deeper
-    costs = cost(np.vstack([x, wrong]))
+    costs = fast.cost(np.vstack([x, wrong]))
     assert -1.0 <= costs[0] < -0.5
     assert np.all(costs[1:] > costs[0] + 0.02)
 
 
-def test_swarm_start_recovers_the_motion_from_mostly_turned_pairs(fast: tuple[Motion, FrameCloud]) -> None:
-    motion, sim = fast
-    frames = assemble_frames_of(sim)
-    tau = frames.cloud.t_s - motion.reference_time_s
-    mid = np.array([tau[frames.frame == f].mean() for f in range(frames.n_frames)])
-    per_frame = [frames.cloud.xyz_m[frames.frame == f] for f in range(frames.n_frames)]
-    extent = extent_m(per_frame)
+def test_swarm_start_recovers_the_motion_from_mostly_turned_pairs(fast: Fast) -> None:
     # Only pairs 1, 7 and 13 registered right; the truth's transforms are those of mean times.
-    x = motion.params()
-    R = rotation_matrices(x, mid)
-    Q = R[1:] @ np.swapaxes(R[:-1], 1, 2)
-    rng = np.random.default_rng(5)
-    for k in (k for k in range(14) if k not in (1, 7, 13)):
-        Q[k] = Q[k] @ Rotation.from_rotvec(np.pi * (R[k] @ np.eye(3)[rng.integers(3)])).as_matrix()
-    c = np.asarray(motion.center_m)
-    cost = OverlapCost(
-        frames.cloud.xyz_m,
-        tau,
-        frames.frame,
-        frames.n_frames,
-        voxel_m=tuple(extent * f for f in VOXEL_FRACTIONS),
-        rng=np.random.default_rng(0),
-    )
-    found = swarm_start(Q, c - Q @ c, mid, cost, extent)
-    _axes_and_rates_close(found.x, motion, axis_deg=3.0, rate_deg_s=2.0)
+    Rs, ts = _pairs(MOTION, [k for k in range(14) if k not in (1, 7, 13)], fast.mid_s, seed=5)
+    found = swarm_start(Rs, ts, fast.mid_s, fast.cost, fast.extent_m)
+    _axes_and_rates_close(found.x, MOTION, axis_deg=3.0, rate_deg_s=2.0)
     assert found.cost <= found.hypothesis_cost
 
 

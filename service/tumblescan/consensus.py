@@ -39,11 +39,10 @@ SAMPLES = 600
 
 @dataclass(frozen=True)
 class Consensus:
-    """The best cone hypothesis, the pairs it explains, and each pair's misfit (radians)."""
+    """The best cone hypothesis and the pairs it explains."""
 
     guess: InitialGuess
     inliers: NDArray[np.bool_]
-    misfit_rad: FloatArray
 
 
 def pair_misfit(x: FloatArray, Rs: FloatArray, tau_from_s: FloatArray, tau_to_s: FloatArray) -> FloatArray:
@@ -70,11 +69,6 @@ def cone_consensus(
     """
     tau_from = np.asarray(t_from_s, dtype=float) - reference_time_s
     tau_to = np.asarray(t_to_s, dtype=float) - reference_time_s
-
-    def score(x: FloatArray) -> float:
-        e = np.minimum(pair_misfit(x, Rs, tau_from, tau_to), inlier_rad)
-        return float(np.sum(e**2))
-
     # 1-2. Hypotheses from triplets, scored on every pair.
     hypotheses, scores = cone_hypotheses(
         Rs, ts, t_from_s, t_to_s, reference_time_s, seed=seed, inlier_rad=inlier_rad, samples=samples
@@ -82,19 +76,17 @@ def cone_consensus(
     if not len(hypotheses):
         raise InitializerError(f"no 3 of the {len(Rs)} frame pairs form a cone")
     i = int(np.argmin(scores))
-    best = (
-        float(scores[i]),
-        InitialGuess(x=hypotheses[i], x_spin_only=_spin_only(hypotheses[i]), cone_collapsed=False, passes=1),
-    )
-    inliers = pair_misfit(best[1].x, Rs, tau_from, tau_to) < inlier_rad
+    best = InitialGuess(x=hypotheses[i], x_spin_only=without_precession(hypotheses[i]), cone_collapsed=False, passes=1)
+    inliers = pair_misfit(best.x, Rs, tau_from, tau_to) < inlier_rad
     if inliers.sum() < 3:
         raise InitializerError(f"only {int(inliers.sum())} of {len(Rs)} frame pairs agree on one motion; 3 are needed")
     # 3. Polish on the inliers; keep the polish only if the pairs agree with it better.
     k = np.flatnonzero(inliers)
     polished = motion_from_transforms(Rs[k], ts[k], t_from_s[k], t_to_s[k], reference_time_s)
-    guess = polished if score(polished.x) <= best[0] else best[1]
-    misfit = pair_misfit(guess.x, Rs, tau_from, tau_to)
-    return Consensus(guess=guess, inliers=misfit < inlier_rad, misfit_rad=misfit)
+    polished_misfit = pair_misfit(polished.x, Rs, tau_from, tau_to)
+    if _truncated_score(polished_misfit, inlier_rad) <= scores[i]:
+        return Consensus(guess=polished, inliers=polished_misfit < inlier_rad)
+    return Consensus(guess=best, inliers=inliers)
 
 
 def _triplets(n: int, samples: int, seed: int) -> list[NDArray[np.int64]]:
@@ -133,10 +125,15 @@ def cone_hypotheses(
         return np.empty((0, N_PARAMS)), np.empty(0)
     hypotheses = np.array(found)
     misfit = np.array([pair_misfit(x, Rs, tau_from, tau_to) for x in hypotheses])
-    return hypotheses, np.sum(np.minimum(misfit, inlier_rad) ** 2, axis=1)
+    return hypotheses, _truncated_score(misfit, inlier_rad)
 
 
-def _spin_only(x: FloatArray) -> FloatArray:
+def _truncated_score(misfit_rad: FloatArray, inlier_rad: float) -> FloatArray:
+    """``s(x)`` of the module docstring from the pairs' misfits (last axis), radians squared."""
+    return np.asarray(np.sum(np.minimum(misfit_rad, inlier_rad) ** 2, axis=-1))
+
+
+def without_precession(x: FloatArray) -> FloatArray:
     """The spin-only start matching hypothesis ``x``: same spin and centre, no precession."""
     out = x.copy()
     out[3:6] = 0.0

@@ -83,6 +83,20 @@ class OverlapCost:
         self.voxel_m = voxel_m
         self.n_frames = n_frames
 
+    @classmethod
+    def for_extent(
+        cls, xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, n_frames: int, *, extent_m: float, seed: int
+    ) -> OverlapCost:
+        """The cost with the default voxel sizes (``VOXEL_FRACTIONS`` of the target's extent)."""
+        return cls(
+            xyz_m,
+            tau_s,
+            frame,
+            n_frames,
+            voxel_m=tuple(extent_m * f for f in VOXEL_FRACTIONS),
+            rng=np.random.default_rng(seed),
+        )
+
     def __call__(self, x: FloatArray) -> FloatArray:
         """Cost of each row of ``x`` ``(k, 9)``: ``(k,)``, between -1 (every query hits) and 0."""
         k = len(x)

@@ -27,9 +27,9 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
-from .consensus import INLIER_RAD, Consensus, cone_consensus, pair_misfit
+from .consensus import INLIER_RAD, cone_consensus, pair_misfit, without_precession
 from .dense import DenseFit, refine_dense
-from .dense_search import VOXEL_FRACTIONS, OverlapCost, swarm_start
+from .dense_search import OverlapCost, swarm_start
 from .errors import InputError
 from .estimate import EstimateOptions, motion_fields, nearest_on_spin_axis, validation_fields, validation_frame_count
 from .frames import Frames
@@ -131,6 +131,7 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
                 data,
                 reg,
                 global_pairs,
+                mid,
                 begin(),
                 voxel,
                 opts,
@@ -154,7 +155,6 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     warnings += kept
     if tried and main.path != attempts[0][1]:
         warnings.append("the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}")
-    assert main is not None
     still_poor = _poor_fit(main.fit)
     if still_poor is not None:
         warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
@@ -272,9 +272,11 @@ def _registration_start(pairs: PairTransforms, start: _Start, mid: FloatArray) -
 
 
 @dataclass(frozen=True)
-class _Start(Consensus):
+class _Start:
     """A starting motion and its inlier pairs; ``voted``: chosen by the vote on rotation angles."""
 
+    guess: InitialGuess
+    inliers: NDArray[np.bool_]
     voted: bool = False
 
 
@@ -293,13 +295,13 @@ def _vote(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
         guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
     except InitializerError as exc:
         raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
-    return _Start(guess=guess, inliers=ok, misfit_rad=np.full(len(ok), np.nan), voted=True)
+    return _Start(guess=guess, inliers=ok, voted=True)
 
 
 def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
     try:
         found = cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
-        return _Start(guess=found.guess, inliers=found.inliers, misfit_rad=found.misfit_rad)
+        return _Start(guess=found.guess, inliers=found.inliers)
     except InitializerError as exc:
         raise FramesUnusableError(
             f"the initial motion could not be formed from the registered frame pairs: {exc} (do the frames "
@@ -312,6 +314,7 @@ def _solve(
     data: DenseData,
     reg: _RegistrationPoints,
     pairs: PairTransforms,
+    mid: FloatArray,
     start: _Start,
     voxel_m: float,
     opts: EstimateOptions,
@@ -324,7 +327,6 @@ def _solve(
 ) -> _Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point."""
     n = data.n_frames
-    mid = _frame_taus(reg.tau_s, reg.frame, n)
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
     for p in range(RETIME_PASSES):
@@ -378,30 +380,15 @@ def _swarm(
     opts: EstimateOptions,
 ) -> _Start:
     """The swarm's start (:mod:`tumblescan.dense_search`) and the pairs that agree with it."""
-    cost = OverlapCost(
-        reg.xyz_m,
-        reg.tau_s,
-        reg.frame,
-        data.n_frames,
-        voxel_m=tuple(extent * f for f in VOXEL_FRACTIONS),
-        rng=np.random.default_rng(opts.seed),
-    )
+    cost = OverlapCost.for_extent(reg.xyz_m, reg.tau_s, reg.frame, data.n_frames, extent_m=extent, seed=opts.seed)
     try:
         found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=opts.seed)
     except ValueError as exc:
         raise FramesUnusableError(f"the swarm found no start: {exc}", field="file") from None
-    misfit = pair_misfit(found.x, pairs.R, mid[:-1], mid[1:])
     return _Start(
-        guess=InitialGuess(x=found.x, x_spin_only=_without_precession(found.x), cone_collapsed=False, passes=1),
-        inliers=misfit < INLIER_RAD,
-        misfit_rad=misfit,
+        guess=InitialGuess(x=found.x, x_spin_only=without_precession(found.x), cone_collapsed=False, passes=1),
+        inliers=pair_misfit(found.x, pairs.R, mid[:-1], mid[1:]) < INLIER_RAD,
     )
-
-
-def _without_precession(x: FloatArray) -> FloatArray:
-    out = x.copy()
-    out[3:6] = 0.0
-    return out
 
 
 def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: list[str]) -> bool:
