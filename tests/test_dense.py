@@ -182,6 +182,27 @@ def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, e
     np.testing.assert_array_equal(rectified.fields["intensity"], original.fields["intensity"])
 
 
+def test_cli_noise_overrides_reach_the_frames_estimator(frames_ply: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from typer.testing import CliRunner
+
+    from tumblescan import EstimateOptions, SensorNoise, cli
+
+    seen: list[EstimateOptions] = []
+
+    class SeenError(Exception):
+        pass
+
+    def spy(frames: object, options: EstimateOptions) -> MotionResult:
+        seen.append(options)
+        raise SeenError
+
+    monkeypatch.setattr(cli, "estimate_from_frames", spy)
+    run = CliRunner().invoke(cli.app, ["estimate", str(frames_ply), "--range-sigma-m", "0.05", "--seed", "3"])
+    assert isinstance(run.exception, SeenError)
+    assert seen[0].sensor == SensorNoise(range_sigma_m=0.05, angle_sigma_arcsec=SensorNoise().angle_sigma_arcsec)
+    assert seen[0].seed == 3
+
+
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
     with serve(tmp_path_factory.mktemp("dense-svc") / "data") as url, httpx.Client(base_url=url, timeout=60) as c:

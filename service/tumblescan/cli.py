@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import wraps
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
@@ -130,24 +131,32 @@ def estimate(
     """Estimate the motion from feature tracks or dense frames and print it; frames are also
     rectified to the reference time."""
     if _is_cloud(tracks_file):
-        estimate_frames_cli(
-            tracks_file, model, reference_time_s, seed, frame_period_s, as_json, report, rectified, truth
+        options = EstimateOptions(
+            model=model,
+            reference_time_s=reference_time_s,
+            seed=seed,
+            frame_period_s=frame_period_s,
+            sensor=_sensor(None, range_sigma_m, angle_sigma_arcsec),
         )
+        outputs = EstimateOutputs(as_json=as_json, report=report, rectified=rectified, truth=truth)
+        estimate_frames_cli(tracks_file, options, outputs)
         return
     tracks = read_tracks(tracks_file)
-    sensor = None
-    if range_sigma_m is not None or angle_sigma_arcsec is not None:
-        base = tracks.sensor or SensorNoise()
-        sensor = SensorNoise(
-            range_sigma_m=range_sigma_m if range_sigma_m is not None else base.range_sigma_m,
-            angle_sigma_arcsec=angle_sigma_arcsec if angle_sigma_arcsec is not None else base.angle_sigma_arcsec,
-        )
     options = EstimateOptions(
-        strategy=strategy, objective=objective, model=model, reference_time_s=reference_time_s, seed=seed, sensor=sensor
+        strategy=strategy,
+        objective=objective,
+        model=model,
+        reference_time_s=reference_time_s,
+        seed=seed,
+        sensor=_sensor(tracks.sensor, range_sigma_m, angle_sigma_arcsec),
     )
     result = estimate_motion(tracks, options)
     if report is not None:
         write_report(report, result, tracks, cloud, truth)
+    _print_result(result, as_json=as_json)
+
+
+def _print_result(result: MotionResult, *, as_json: bool) -> None:
     if as_json:
         sys.stdout.write(result.model_dump_json() + "\n")
     else:
@@ -162,28 +171,41 @@ def _is_cloud(path: Path) -> bool:
         return False
 
 
-def estimate_frames_cli(
-    path: Path,
-    model: ModelChoice,
-    reference_time_s: float | None,
-    seed: int,
-    frame_period_s: float | None,
-    as_json: bool,
-    report: Path | None,
-    rectified: Path | None,
-    truth: Path | None,
-) -> None:
+@dataclass(frozen=True)
+class EstimateOutputs:
+    """Where ``estimate`` writes: JSON or text on stdout, the HTML report, the rectified cloud
+    (frames input), and the truth shown in the report."""
+
+    as_json: bool = False
+    report: Path | None = None
+    rectified: Path | None = None
+    truth: Path | None = None
+
+
+def _sensor(
+    declared: SensorNoise | None, range_sigma_m: float | None, angle_sigma_arcsec: float | None
+) -> SensorNoise | None:
+    """The declared noise (default: Table 1's) with the command line's overrides, or None without any."""
+    if range_sigma_m is None and angle_sigma_arcsec is None:
+        return None
+    base = declared or SensorNoise()
+    return SensorNoise(
+        range_sigma_m=range_sigma_m if range_sigma_m is not None else base.range_sigma_m,
+        angle_sigma_arcsec=angle_sigma_arcsec if angle_sigma_arcsec is not None else base.angle_sigma_arcsec,
+    )
+
+
+def estimate_frames_cli(path: Path, options: EstimateOptions, outputs: EstimateOutputs) -> None:
     """``estimate`` on dense frames: motion, rectified cloud, optional report."""
-    frames = read_frames(path, frame_period_s=frame_period_s)
-    options = EstimateOptions(model=model, reference_time_s=reference_time_s, seed=seed, frame_period_s=frame_period_s)
+    frames = read_frames(path, frame_period_s=options.frame_period_s)
     result = estimate_from_frames(frames, options)
     cloud = frames.cloud
     xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
-    out = rectified or path.with_name(path.stem + "-rectified.ply")
+    out = outputs.rectified or path.with_name(path.stem + "-rectified.ply")
     rectified_cloud = TimedCloud(xyz, cloud.t_s, cloud.fields)
     write_ply(out, rectified_cloud)
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={result.reference_time_s} s", err=True)
-    if report is not None:
+    if outputs.report is not None:
         from .jobs.linescan import load_truth
         from .report import ReportInputs, build_report
 
@@ -192,14 +214,11 @@ def estimate_frames_cli(
             title=f"Motion estimate: {path.stem}",
             distorted=cloud,
             rectified=rectified_cloud,
-            truth=load_truth(truth) if truth is not None else None,
+            truth=load_truth(outputs.truth) if outputs.truth is not None else None,
         )
-        report.write_text(build_report(inputs), encoding="utf-8")
-        typer.echo(f"wrote {report}", err=True)
-    if as_json:
-        sys.stdout.write(result.model_dump_json() + "\n")
-    else:
-        typer.echo(format_result(result))
+        outputs.report.write_text(build_report(inputs), encoding="utf-8")
+        typer.echo(f"wrote {outputs.report}", err=True)
+    _print_result(result, as_json=outputs.as_json)
 
 
 @app.command()

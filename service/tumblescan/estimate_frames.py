@@ -59,6 +59,34 @@ class FramesUnusableError(InputError):
 
 
 @dataclass(frozen=True)
+class _RegistrationPoints:
+    """The thinned cloud registration works on: positions, offsets from ``T``, frames."""
+
+    xyz_m: FloatArray
+    tau_s: FloatArray
+    frame: NDArray[np.int64]
+
+    def split(self, xyz_m: FloatArray, n: int) -> list[FloatArray]:
+        """``xyz_m`` (one row per point here) split into the ``n`` frames."""
+        return [xyz_m[self.frame == f] for f in range(n)]
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every attempt at the motion shares: the dense data, the thinned cloud registration
+    works on, the frames' mean times, the registration voxel and the caller's options."""
+
+    data: DenseData
+    reg: _RegistrationPoints
+    mid: FloatArray
+    voxel_m: float
+    extent_m: float
+    opts: EstimateOptions
+    noise: SensorNoise
+    progress: Progress
+
+
+@dataclass(frozen=True)
 class _Solve:
     fit: DenseFit
     initial: InitialGuess
@@ -105,42 +133,58 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     per_frame = reg.split(reg.xyz_m, n_frames)
     extent = extent_m(per_frame)
     data = prepare(cloud.xyz_m, cloud.t_s - T, frames.frame, surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION)
-    noise = opts.sensor or SensorNoise()
-    warnings: list[str] = []
-    # 2-3. Register, initialize and refine on all frames.
+    # 2-3. Register, initialize and refine on all frames, from up to three starts.
     progress("registering", 0.0)
     voxel = max(extent * VOXEL_FRACTION, 1e-3)
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
-    spin_only = opts.model == "spin-only"
-    main: _Solve | None = None
-    # 2a. The vote on rotation angles, then, if its motion fits poorly, the consensus over
-    # triplets of pairs, then the swarm on the dense cost; the best fit is kept.
+    setup = _Setup(data, reg, mid, voxel, extent, opts, opts.sensor or SensorNoise(), progress)
+    main, warnings = _best_attempt(setup, global_pairs)
+    still_poor = _poor_fit(main.fit)
+    if still_poor is not None:
+        warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
+    fit = main.fit
+    # 4. Model choice.
+    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
+        progress("refining", 0.66)
+        fit = refine_dense(
+            data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+        )
+    # 5. Validate: do the first n2 frames alone support the motion?
+    check: Similarity | None = None
+    if n2 < n_frames:
+        progress("validating", 0.7)
+        check = _validate(setup, n2, fit)
+    else:
+        warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
+    if check is not None and not check.passed:
+        warnings.append(
+            f"two-frame-count check failed: solutions from {n_frames} and {n2} frames differ by "
+            f"{check.distance:.3g} (threshold {check.threshold:.3g}); treat the estimate with caution"
+        )
+    progress("estimated", 1.0)
+    return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+
+
+def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, list[str]]:
+    """The vote on rotation angles, then, if its motion fits poorly, the consensus over triplets
+    of pairs, then the swarm on the dense cost: the best fit (smallest residual scale) and its
+    warnings."""
+    mid, seed = setup.mid, setup.opts.seed
     attempts = (
-        (lambda: _vote(global_pairs, mid, opts.seed), "registration+cone+dense"),
-        (lambda: _consensus(global_pairs, mid, opts.seed), "registration+consensus+dense"),
-        (lambda: _swarm(data, reg, global_pairs, mid, extent, opts), "registration+swarm+dense"),
+        (lambda: _vote(global_pairs, mid), "registration+cone+dense"),
+        (lambda: _consensus(global_pairs, mid, seed), "registration+consensus+dense"),
+        (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
+    main: _Solve | None = None
+    kept: list[str] = []
     tried: list[str] = []
     for begin, path in attempts:
         if tried:
-            progress("initializing", 0.05)
+            setup.progress("initializing", 0.05)
         attempt_warnings: list[str] = []
         try:
-            alt = _solve(
-                data,
-                reg,
-                global_pairs,
-                mid,
-                begin(),
-                voxel,
-                opts,
-                noise,
-                progress,
-                attempt_warnings,
-                spin_only=spin_only,
-                path=path,
-            )
+            alt = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
@@ -152,33 +196,9 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
         tried.append(f"{path}: {poor}")
     if main is None:
         raise FramesUnusableError("no start for the motion was found: " + "; ".join(tried), field="file")
-    warnings += kept
     if tried and main.path != attempts[0][1]:
-        warnings.append("the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}")
-    still_poor = _poor_fit(main.fit)
-    if still_poor is not None:
-        warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
-    fit = main.fit
-    # 4. Model choice.
-    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
-        progress("refining", 0.66)
-        fit = refine_dense(
-            data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=noise, seed=opts.seed
-        )
-    # 5. Validate: do the first n2 frames alone support the motion?
-    check: Similarity | None = None
-    if n2 < n_frames:
-        progress("validating", 0.7)
-        check = _validate(data, n2, fit, opts, noise, progress)
-    else:
-        warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
-    if check is not None and not check.passed:
-        warnings.append(
-            f"two-frame-count check failed: solutions from {n_frames} and {n2} frames differ by "
-            f"{check.distance:.3g} (threshold {check.threshold:.3g}); treat the estimate with caution"
-        )
-    progress("estimated", 1.0)
-    return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+        kept = [*kept, "the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}"]
+    return main, kept
 
 
 def _never_backwards(progress: Progress) -> Progress:
@@ -192,19 +212,6 @@ def _never_backwards(progress: Progress) -> Progress:
         progress(stage, most)
 
     return report
-
-
-@dataclass(frozen=True)
-class _RegistrationPoints:
-    """The thinned cloud registration works on: positions, offsets from ``T``, frames."""
-
-    xyz_m: FloatArray
-    tau_s: FloatArray
-    frame: NDArray[np.int64]
-
-    def split(self, xyz_m: FloatArray, n: int) -> list[FloatArray]:
-        """``xyz_m`` (one row per point here) split into the ``n`` frames."""
-        return [xyz_m[self.frame == f] for f in range(n)]
 
 
 def _thin(frames: Frames, seed: int) -> NDArray[np.int64]:
@@ -280,7 +287,7 @@ class _Start:
     voted: bool = False
 
 
-def _vote(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
+def _vote(pairs: PairTransforms, mid: FloatArray) -> _Start:
     """The cone on the pairs whose rotation angle is near the median (every pair of the cone
     has the same angle): the path measured on the paper's grid."""
     ok = consistent_pairs(pairs)
@@ -310,31 +317,19 @@ def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
         ) from None
 
 
-def _solve(
-    data: DenseData,
-    reg: _RegistrationPoints,
-    pairs: PairTransforms,
-    mid: FloatArray,
-    start: _Start,
-    voxel_m: float,
-    opts: EstimateOptions,
-    noise: SensorNoise,
-    progress: Progress,
-    warnings: list[str],
-    *,
-    spin_only: bool,
-    path: str = "registration+cone+dense",
-) -> _Solve:
+def _solve(setup: _Setup, pairs: PairTransforms, start: _Start, warnings: list[str], *, path: str) -> _Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point."""
-    n = data.n_frames
+    reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
     for p in range(RETIME_PASSES):
         progress("registering", 0.1 * (p + 1) / RETIME_PASSES)
         xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
         initial = _registration_start(pairs, start, mid)
-        pairs = register_consecutive(reg.split(xyz, n), voxel_m=voxel_m, initial=initial, seed=opts.seed)
-        start = _vote(pairs, mid, opts.seed) if start.voted else _consensus(pairs, mid, opts.seed)
+        pairs = register_consecutive(
+            reg.split(xyz, setup.data.n_frames), voxel_m=setup.voxel_m, initial=initial, seed=opts.seed
+        )
+        start = _vote(pairs, mid) if start.voted else _consensus(pairs, mid, opts.seed)
     progress("initializing", 0.1)
     used = int(start.inliers.sum())
     if used < len(start.inliers):
@@ -348,12 +343,13 @@ def _solve(
     def on_step(step: int, total: int) -> None:
         progress("refining", 0.15 + 0.5 * step / total)
 
+    spin_only = opts.model == "spin-only"
     fit = refine_dense(
-        data,
+        setup.data,
         guess.x_spin_only if spin_only else guess.x,
         spin_only=spin_only,
         config=opts.dense,
-        noise=noise,
+        noise=setup.noise,
         seed=opts.seed,
         on_iteration=on_step,
     )
@@ -371,18 +367,12 @@ def _poor_fit(fit: DenseFit) -> str | None:
     return None
 
 
-def _swarm(
-    data: DenseData,
-    reg: _RegistrationPoints,
-    pairs: PairTransforms,
-    mid: FloatArray,
-    extent: float,
-    opts: EstimateOptions,
-) -> _Start:
+def _swarm(setup: _Setup, pairs: PairTransforms) -> _Start:
     """The swarm's start (:mod:`tumblescan.dense_search`) and the pairs that agree with it."""
-    cost = OverlapCost.for_extent(reg.xyz_m, reg.tau_s, reg.frame, data.n_frames, extent_m=extent, seed=opts.seed)
+    reg, mid, extent, seed = setup.reg, setup.mid, setup.extent_m, setup.opts.seed
+    cost = OverlapCost.for_extent(reg.xyz_m, reg.tau_s, reg.frame, setup.data.n_frames, extent_m=extent, seed=seed)
     try:
-        found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=opts.seed)
+        found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=seed)
     except ValueError as exc:
         raise FramesUnusableError(f"the swarm found no start: {exc}", field="file") from None
     return _Start(
@@ -404,22 +394,21 @@ def _precession_insignificant(fit: DenseFit, opts: EstimateOptions, warnings: li
     return True
 
 
-def _validate(
-    data: DenseData, n2: int, fit: DenseFit, opts: EstimateOptions, noise: SensorNoise, progress: Progress
-) -> Similarity:
+def _validate(setup: _Setup, n2: int, fit: DenseFit) -> Similarity:
     """Refine again on the first ``n2`` frames only, from the motion found on all of them: do
     those frames alone support it? (A start from their own registrations would repeat the
     initializer's work on a shorter, weaker baseline; that start is tested by the main solve.)"""
 
     def on_step(step: int, total: int) -> None:
-        progress("validating", 0.7 + 0.28 * step / total)
+        setup.progress("validating", 0.7 + 0.28 * step / total)
 
+    opts = setup.opts
     sub = refine_dense(
-        data.first_frames(n2),
+        setup.data.first_frames(n2),
         fit.x,
         spin_only=fit.spin_only,
         config=opts.dense,
-        noise=noise,
+        noise=setup.noise,
         seed=opts.seed + 1,
         converged=True,
         gauge_point=fit.x[6:9] if fit.spin_only else None,
