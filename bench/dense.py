@@ -16,9 +16,11 @@ import json
 import resource
 import tempfile
 import time
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tumblescan import (
     Scene,
@@ -68,30 +70,54 @@ def errors(r: MotionResult, truth: object) -> dict[str, float]:
 SD_KEYS = ("spin_axis_sd", "spin_rate_sd", "precession_axis_sd", "precession_rate_sd")
 
 
-def one(seed: int, distance_m: float, workdir: Path) -> dict[str, object]:
+@dataclass
+class Run:
+    """One motion: the whole job's time and stages, dense and corner errors, the bound."""
+
+    seed: int
+    distance_m: float
+    points: int
+    total_s: float
+    stages_s: dict[str, float]
+    dense: dict[str, float]
+    dense_validated: bool | None
+    bound: dict[str, float]
+    corner: dict[str, float]
+    rectification_error_m: float
+    warnings: list[str]
+    # Seed 0 only: the distorted and rectified points for the plot.
+    sample: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(default=None, repr=False)
+
+    def method(self, name: str) -> dict[str, float]:
+        return self.dense if name == "dense" else self.corner
+
+
+def one(seed: int, distance_m: float, workdir: Path) -> Run:
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene()
     sim = simulate_frames(motion, scene, seed=seed)
     path = workdir / f"frames-{seed}.ply"
     write_ply(path, TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
-    # The whole job, stage by stage, as the worker runs it.
+    # The whole job, stage by stage, as the worker runs it: the time from one progress report
+    # to the next belongs to the stage the first one announced.
     stages: dict[str, float] = {}
     mark = time.perf_counter()
     started = mark
+    current = "reading+assembling"
 
     def progress(stage: str, fraction: float) -> None:
-        nonlocal mark
+        nonlocal mark, current
         now = time.perf_counter()
-        stages[stage] = stages.get(stage, 0.0) + now - mark
-        mark = now
+        stages[current] = stages.get(current, 0.0) + now - mark
+        mark, current = now, stage
 
     frames = read_frames(path)
-    progress("reading+assembling", 0)
+    progress("preparing", 0)
     result = estimate_from_frames(frames, progress=progress)
-    progress("estimate tail", 0)
+    progress("rectifying+writing", 0)
     xyz = rectify(frames.cloud.xyz_m, frames.cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
     write_ply(workdir / "rectified.ply", TimedCloud(xyz, frames.cloud.t_s, frames.cloud.fields))
-    progress("rectifying+writing", 0)
+    progress("done", 0)
     total = time.perf_counter() - started
     # Rectification error due to the motion: the same observed points rectified with the truth.
     T = result.reference_time_s
@@ -100,20 +126,20 @@ def one(seed: int, distance_m: float, workdir: Path) -> dict[str, object]:
     bound = dense_bound(motion, scene, sim, result.reference_time_s)
     tracks, _ = simulate_tracks(motion, scene, seed=seed)
     corner = estimate_motion(tracks)
-    return {
-        "seed": seed,
-        "distance_m": distance_m,
-        "points": len(frames.cloud),
-        "total_s": total,
-        "stages_s": stages,
-        "dense": errors(result, motion),
-        "dense_validated": result.validation.passed,
-        "bound": bound,
-        "corner": errors(corner, motion),
-        "rectification_error_m": rect_err,
-        "warnings": result.warnings,
-        "sample": (sim.xyz_m, xyz) if seed == 0 else None,
-    }
+    return Run(
+        seed=seed,
+        distance_m=distance_m,
+        points=len(frames.cloud),
+        total_s=total,
+        stages_s=stages,
+        dense=errors(result, motion),
+        dense_validated=result.validation.passed,
+        bound=bound,
+        corner=errors(corner, motion),
+        rectification_error_m=rect_err,
+        warnings=result.warnings,
+        sample=(sim.xyz_m, xyz) if seed == 0 else None,
+    )
 
 
 def main() -> None:
@@ -121,24 +147,23 @@ def main() -> None:
     ap.add_argument("--motions", type=int, default=30)
     ap.add_argument("--distances", type=float, nargs="+", default=[50.0, 100.0])
     args = ap.parse_args()
-    rows: list[dict[str, object]] = []
+    rows: list[Run] = []
     with tempfile.TemporaryDirectory() as tmp:
         for distance in args.distances:
             for seed in range(args.motions):
                 row = one(seed, distance, Path(tmp))
-                d = row["dense"]
-                assert isinstance(d, dict)
+                d = row.dense
                 print(
-                    f"{distance:.0f} m seed {seed}: {row['total_s']:.1f} s, spin {d['spin_rate_deg_s']:.4f} deg/s, "
+                    f"{distance:.0f} m seed {seed}: {row.total_s:.1f} s, spin {d['spin_rate_deg_s']:.4f} deg/s, "
                     f"prec {d['precession_rate_deg_s']:.4f} deg/s, axes {d['spin_axis_deg']:.4f} "
-                    f"{d['precession_axis_deg']:.4f} deg, rect {row['rectification_error_m'] * 1000:.2f} mm",
+                    f"{d['precession_axis_deg']:.4f} deg, rect {row.rectification_error_m * 1000:.2f} mm",
                     flush=True,
                 )
                 rows.append(row)
     report(rows, args.distances)
 
 
-def report(rows: list[dict[str, object]], distances: list[float]) -> None:
+def report(rows: list[Run], distances: list[float]) -> None:
     keys = ("spin_axis_deg", "spin_rate_deg_s", "precession_axis_deg", "precession_rate_deg_s")
     limits = {
         "spin_axis_deg": 0.02,
@@ -148,14 +173,14 @@ def report(rows: list[dict[str, object]], distances: list[float]) -> None:
     }
     out = []
     for distance in distances:
-        sel = [r for r in rows if r["distance_m"] == distance]
+        sel = [r for r in rows if r.distance_m == distance]
         for method in ("dense", "corner"):
-            errs = {k: np.array([r[method][k] for r in sel]) for k in keys}  # type: ignore[index]
+            errs = {k: np.array([r.method(method)[k] for r in sel]) for k in keys}
             within = np.mean(np.all([errs[k] <= limits[k] for k in keys], axis=0))
             sig = {
-                k: np.array([r[method][k.replace("_deg_s", "_sigma").replace("_deg", "_sigma")] for r in sel])
+                k: np.array([r.method(method)[k.replace("_deg_s", "_sigma").replace("_deg", "_sigma")] for r in sel])
                 for k in keys
-            }  # type: ignore[index]
+            }
             out.append(
                 [f"{distance:.0f} m", method]
                 + [f"{np.median(errs[k]):.4f} / {np.percentile(errs[k], 95):.4f}" for k in keys]
@@ -166,9 +191,9 @@ def report(rows: list[dict[str, object]], distances: list[float]) -> None:
     print(table(out, ["distance", "method", *keys, "RMS err/sigma", "all within target"]))
     sd_rows = []
     for distance in distances:
-        sel = [r for r in rows if r["distance_m"] == distance]
+        sel = [r for r in rows if r.distance_m == distance]
         for method in ("dense", "corner"):
-            sds = [np.array([r[method][k] for r in sel]) for k in SD_KEYS]  # type: ignore[index]
+            sds = [np.array([r.method(method)[k] for r in sel]) for k in SD_KEYS]
             sd_rows.append(
                 [f"{distance:.0f} m", method] + [f"{np.median(v):.4f} / {np.percentile(v, 95):.4f}" for v in sds]
             )
@@ -176,23 +201,23 @@ def report(rows: list[dict[str, object]], distances: list[float]) -> None:
     print(table(sd_rows, ["distance", "method", *SD_KEYS]))
     stage_rows = []
     for distance in distances:
-        sel = [r for r in rows if r["distance_m"] == distance]
-        names = sorted({k for r in sel for k in r["stages_s"]})  # type: ignore[attr-defined]
+        sel = [r for r in rows if r.distance_m == distance]
+        names = list(dict.fromkeys(k for r in sel for k in r.stages_s))
         for n in names:
-            v = [r["stages_s"].get(n, 0.0) for r in sel]  # type: ignore[attr-defined]
+            v = [r.stages_s.get(n, 0.0) for r in sel]
             stage_rows.append([f"{distance:.0f} m", n, f"{np.median(v):.2f}", f"{np.max(v):.2f}"])
-        tot = [r["total_s"] for r in sel]
-        rect = [r["rectification_error_m"] for r in sel]
-        pts = [r["points"] for r in sel]
+        tot = [r.total_s for r in sel]
+        rect = [r.rectification_error_m for r in sel]
+        pts = [r.points for r in sel]
         stage_rows.append([f"{distance:.0f} m", "WHOLE JOB", f"{np.median(tot):.2f}", f"{np.max(tot):.2f}"])
         print(
             f"{distance:.0f} m: points per job median {int(np.median(pts))}; rectification error due to the motion "
             f"mean {np.mean(rect) * 1000:.2f} mm, max {np.max(rect) * 1000:.2f} mm; validated "
-            f"{sum(bool(r['dense_validated']) for r in sel)}/{len(sel)}"
+            f"{sum(bool(r.dense_validated) for r in sel)}/{len(sel)}"
         )
     print(table(stage_rows, ["distance", "stage", "median s", "max s"]))
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
-    dump = [{k: v for k, v in r.items() if k != "sample"} for r in rows]
+    dump = [{f.name: getattr(r, f.name) for f in fields(r) if f.name != "sample"} for r in rows]
     (out_dir() / "dense.json").write_text(json.dumps(dump, indent=1, default=float))
     plot(rows)
 
@@ -209,16 +234,16 @@ def efficient_share(bound: dict[str, float], limits: dict[str, float]) -> float:
     return float(p)
 
 
-def print_bound(rows: list[dict[str, object]], distances: list[float], limits: dict[str, float]) -> None:
+def print_bound(rows: list[Run], distances: list[float], limits: dict[str, float]) -> None:
     """The dense Cramer-Rao bound (bench/dense_bound.py) against the targets and the errors."""
     keys = list(limits)
     out = []
     for distance in distances:
-        sel = [r for r in rows if r["distance_m"] == distance]
-        b = {k: np.array([r["bound"][k] for r in sel]) for k in keys}  # type: ignore[index]
-        e = {k: np.array([r["dense"][k] for r in sel]) for k in keys}  # type: ignore[index]
+        sel = [r for r in rows if r.distance_m == distance]
+        b = {k: np.array([r.bound[k] for r in sel]) for k in keys}
+        e = {k: np.array([r.dense[k] for r in sel]) for k in keys}
         feasible = np.mean(np.all([2 * b[k] <= limits[k] for k in keys], axis=0))
-        expected = np.mean([efficient_share(r["bound"], limits) for r in sel])  # type: ignore[arg-type]
+        expected = np.mean([efficient_share(r.bound, limits) for r in sel])
         within = np.mean(np.all([e[k] <= limits[k] for k in keys], axis=0))
         out.append(
             [f"{distance:.0f} m"]
@@ -235,16 +260,16 @@ def print_bound(rows: list[dict[str, object]], distances: list[float], limits: d
     )
 
 
-def plot(rows: list[dict[str, object]]) -> None:
+def plot(rows: list[Run]) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sample = next((r["sample"] for r in rows if r["sample"] is not None), None)
+    sample = next((r.sample for r in rows if r.sample is not None), None)
     fig, ax = plt.subplots(1, 3, figsize=(16, 5))
     if sample is not None:
-        raw, rect = sample  # type: ignore[misc]
+        raw, rect = sample
         step = max(1, len(raw) // 40000)
         ax[0].scatter(raw[::step, 0], raw[::step, 1], s=0.2, c="tab:red")
         ax[0].set_title("distorted (all frames, sensor x-y)")
@@ -255,7 +280,7 @@ def plot(rows: list[dict[str, object]]) -> None:
             a.set_xlabel("x (m)")
             a.set_ylabel("y (m)")
     for method, marker in (("dense", "o"), ("corner", "x")):
-        v = [r[method]["spin_rate_deg_s"] for r in rows]  # type: ignore[index]
+        v = [r.method(method)["spin_rate_deg_s"] for r in rows]
         ax[2].scatter(range(len(v)), v, marker=marker, label=f"{method} spin-rate error")
     ax[2].axhline(0.01, color="k", lw=0.8, ls="--", label="target 0.01 deg/s")
     ax[2].set_yscale("log")

@@ -90,7 +90,7 @@ def dense_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     for f in range(n_faces):
         # pinv: a face hit by a point or two fits its own plane and tells nothing.
         schur -= F_mf[f] @ np.linalg.pinv(F_ff[f], rcond=1e-10, hermitian=True) @ F_mf[f].T
-    cov = np.linalg.inv(schur)
+    cov = np.asarray(np.linalg.inv(schur), dtype=np.float64)
     deg = np.degrees
     return {
         "spin_axis_deg": float(deg(axis_sigma_rad(x, cov, 0, 1))),

@@ -119,7 +119,8 @@ def scaleout(tmp: Path, stack: ExitStack) -> str:
         spawn(["worker", "--workers", "1"], {**env, "TUMBLESCAN_DATA_DIR": str(tmp / f"w{i}")}, tmp / f"w{i}.log")
         for i in range(2)
     ]
-    stack.callback(lambda: [stop(w) for w in workers])
+    for w in workers:
+        stack.callback(stop, w)
     url = stack.enter_context(serve(tmp / "api", extra_env=env, args=["--no-workers"]))
     wait_ready(url, workers[0], tmp / "w0.log")
     return url

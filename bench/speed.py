@@ -24,7 +24,7 @@ def time_estimates(n: int, strategy: str) -> np.ndarray:
     out = []
     for tracks in data:
         t = time.perf_counter()
-        estimate_motion(tracks, EstimateOptions(strategy=strategy))  # type: ignore[arg-type]
+        estimate_motion(tracks, EstimateOptions(strategy=strategy))
         out.append(time.perf_counter() - t)
     return np.array(out)
 

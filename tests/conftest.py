@@ -14,7 +14,7 @@ def motion_for(seed: int, **kw: object) -> Motion:
 
 def tracks_for(seed: int, *, noise: bool = True, **scene_kw: object) -> tuple[Motion, Tracks]:
     motion = motion_for(seed)
-    tracks, _ = simulate_tracks(motion, Scene(noise=noise, **scene_kw), seed=seed)  # type: ignore[arg-type]
+    tracks, _ = simulate_tracks(motion, Scene(noise=noise, **scene_kw), seed=seed)
     return motion, tracks
 
 

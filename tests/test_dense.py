@@ -238,7 +238,8 @@ def test_upload_of_frames_returns_the_motion_and_the_rectified_cloud(
 def test_bad_frame_uploads_are_422_naming_the_field(http: httpx.Client, frames_ply: Path, tmp_path: Path) -> None:
     three = tmp_path / "three.ply"
     frame = np.repeat(np.arange(3), 10).astype(np.int32)
-    write_ply(three, TimedCloud(np.ones((30, 3)), frame + np.tile(np.arange(10) * 0.01, 3), {"frame": frame}))
+    t_s = frame.astype(float) + np.tile(np.arange(10) * 0.01, 3)
+    write_ply(three, TimedCloud(np.ones((30, 3)), t_s, {"frame": frame}))
     r = http.post("/v1/jobs/upload", files={"file": ("three.ply", three.read_bytes())})
     assert r.status_code == 422 and r.json()["detail"]["code"] == "too_few_frames", r.text
     assert "at least 4" in r.json()["detail"]["message"]
@@ -261,7 +262,7 @@ def test_bad_frame_uploads_are_422_naming_the_field(http: httpx.Client, frames_p
 
 def test_dense_data_keeps_the_first_frames_consistent(simulated: tuple[Motion, FrameCloud]) -> None:
     _, sim = simulated
-    data = prepare(sim.xyz_m, sim.t_s - sim.t_s.min(), sim.frame, surfel_m=0.2)
+    data = prepare(sim.xyz_m, sim.t_s - sim.t_s.min(), sim.frame.astype(np.int64), surfel_m=0.2)
     first = data.first_frames(5)
     assert first.n_frames == 5 and np.array_equal(first.xyz_m, sim.xyz_m[sim.frame < 5])
     # Every point still belongs to a surfel of its own frame.

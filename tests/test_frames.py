@@ -73,7 +73,7 @@ def range_image(c: FrameCloud, frames: int) -> dict[str, np.ndarray]:
 
 
 def test_range_images_become_the_same_points(dense: FrameCloud, tmp_path: Path) -> None:
-    np.savez_compressed(tmp_path / "ri.npz", **range_image(dense, 6))
+    np.savez_compressed(tmp_path / "ri.npz", **range_image(dense, 6))  # type: ignore[arg-type]  # numpy stubs: **arrays could hit allow_pickle
     cloud = read_range_images(tmp_path / "ri.npz")
     order = np.lexsort((dense.pixel, dense.line, dense.frame))
     assert len(cloud) == len(dense.t_s)
@@ -93,7 +93,7 @@ def test_bad_range_images_are_refused(dense: FrameCloud, tmp_path: Path) -> None
         ({**good, "range_m": -good["range_m"]}, MalformedInputError, "negative"),
     ]
     for i, (arrays, error, message) in enumerate(cases):
-        np.savez(tmp_path / f"bad{i}.npz", **arrays)
+        np.savez(tmp_path / f"bad{i}.npz", **arrays)  # type: ignore[arg-type]
         with pytest.raises(error, match=message):
             read_range_images(tmp_path / f"bad{i}.npz")
     (tmp_path / "text.npz").write_text("not a zip")
@@ -109,7 +109,7 @@ def test_a_zip_bomb_is_refused_before_it_is_expanded(tmp_path: Path) -> None:
         "azimuth_deg": np.zeros(1000),
         "elevation_deg": np.zeros(1000),
     }
-    np.savez_compressed(tmp_path / "bomb.npz", **bomb)
+    np.savez_compressed(tmp_path / "bomb.npz", **bomb)  # type: ignore[arg-type]
     assert (tmp_path / "bomb.npz").stat().st_size < 1_000_000
     with pytest.raises(LimitExceededError, match="would expand to"):
         read_range_images(tmp_path / "bomb.npz", max_bytes=10_000_000)

@@ -175,9 +175,9 @@ def test_ply_written_by_open3d_is_read(tmp_path: Path) -> None:
     import open3d as o3d
 
     cloud = _cloud(50)
-    pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor(cloud.xyz_m))
-    pcd.point["timestamp"] = o3d.core.Tensor(cloud.t_s[:, None])
-    assert o3d.t.io.write_point_cloud(str(tmp_path / "o.ply"), pcd)
+    pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor(cloud.xyz_m))  # type: ignore[call-overload]
+    pcd.point["timestamp"] = o3d.core.Tensor(cloud.t_s[:, None])  # type: ignore[call-overload]
+    assert o3d.t.io.write_point_cloud(str(tmp_path / "o.ply"), pcd)  # type: ignore[arg-type]
     back = read_ply(tmp_path / "o.ply")
     assert np.array_equal(back.t_s, cloud.t_s) and np.allclose(back.xyz_m, cloud.xyz_m)
 

@@ -26,7 +26,7 @@ def test_rotation_matrix_is_orthonormal_and_matches_rodrigues(a: float, b: float
     assert np.allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(R) == pytest.approx(1.0)
     v = np.array([0.3, -1.2, 2.0])
-    assert np.allclose(R @ v, rotate(axis, angle, v), atol=1e-12)
+    assert np.allclose(R @ v, rotate(axis, np.asarray(angle), v), atol=1e-12)
     assert np.allclose(R @ axis, axis, atol=1e-12)
 
 
