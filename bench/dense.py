@@ -37,7 +37,7 @@ from tumblescan import (
 from tumblescan.result import MotionResult
 
 from .common import machine, out_dir, table
-from .dense_bound import dense_bound
+from .dense_bound import dense_bound, fitted_hits
 
 
 def errors(r: MotionResult, truth: object) -> dict[str, float]:
@@ -82,6 +82,9 @@ class Run:
     dense: dict[str, float]
     dense_validated: bool | None
     bound: dict[str, float]
+    # The bound of the hits in the surfels the fit can use, and their share of all hits.
+    bound_fitted: dict[str, float]
+    fitted_share: float
     corner: dict[str, float]
     rectification_error_m: float
     warnings: list[str]
@@ -123,7 +126,8 @@ def one(seed: int, distance_m: float, workdir: Path) -> Run:
     T = result.reference_time_s
     true_xyz = rectify(frames.cloud.xyz_m, frames.cloud.t_s, motion, to_time_s=T)
     rect_err = float(np.mean(np.linalg.norm(xyz - true_xyz, axis=1)))
-    bound = dense_bound(motion, scene, sim, result.reference_time_s)
+    bound = dense_bound(motion, scene, sim, T)
+    fitted = fitted_hits(motion, scene, sim, T)
     tracks, _ = simulate_tracks(motion, scene, seed=seed)
     corner = estimate_motion(tracks)
     return Run(
@@ -135,6 +139,8 @@ def one(seed: int, distance_m: float, workdir: Path) -> Run:
         dense=errors(result, motion),
         dense_validated=result.validation.passed,
         bound=bound,
+        bound_fitted=dense_bound(motion, scene, sim, T, hits=fitted),
+        fitted_share=float(np.mean(fitted)),
         corner=errors(corner, motion),
         rectification_error_m=rect_err,
         warnings=result.warnings,
@@ -242,6 +248,7 @@ def print_bound(rows: list[Run], distances: list[float], limits: dict[str, float
         sel = [r for r in rows if r.distance_m == distance]
         b = {k: np.array([r.bound[k] for r in sel]) for k in keys}
         e = {k: np.array([r.dense[k] for r in sel]) for k in keys}
+        bf = {k: np.array([r.bound_fitted[k] for r in sel]) for k in keys}
         feasible = np.mean(np.all([2 * b[k] <= limits[k] for k in keys], axis=0))
         expected = np.mean([efficient_share(r.bound, limits) for r in sel])
         within = np.mean(np.all([e[k] <= limits[k] for k in keys], axis=0))
@@ -249,13 +256,26 @@ def print_bound(rows: list[Run], distances: list[float], limits: dict[str, float
             [f"{distance:.0f} m"]
             + [f"{np.median(b[k]):.4f} / {np.percentile(b[k], 95):.4f}" for k in keys]
             + [f"{np.sqrt(np.mean(np.concatenate([(e[k] / b[k]) ** 2 for k in keys]))):.2f}"]
+            + [f"{np.mean([r.fitted_share for r in sel]):.2f}"]
+            + [f"{np.median(np.concatenate([bf[k] / b[k] for k in keys])):.2f}"]
+            + [f"{np.sqrt(np.mean(np.concatenate([(e[k] / bf[k]) ** 2 for k in keys]))):.2f}"]
             + [f"{100 * feasible:.0f} %", f"{100 * expected:.0f} %", f"{100 * within:.0f} %"]
         )
     print("\nCramer-Rao bound of dense frames (1 sigma, median / p95), and what it allows")
     print(
         table(
             out,
-            ["distance", *keys, "RMS err/bound", "2 bound within targets", "expected within (efficient)", "within"],
+            [
+                "distance",
+                *keys,
+                "RMS err/bound",
+                "hits in fitted surfels",
+                "their bound/bound",
+                "RMS err/their bound",
+                "2 bound within targets",
+                "expected within (efficient)",
+                "within",
+            ],
         )
     )
 

@@ -21,9 +21,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
+from tumblescan.estimate_frames import SURFEL_FRACTION
+from tumblescan.registration import extent_m
 from tumblescan.sensor import perpendiculars
 from tumblescan.simulate import FrameCloud
-from tumblescan.surfels import LineMapping, normal_variance
+from tumblescan.surfels import LineMapping, build_surfels, normal_variance, prepare
 from tumblescan.uncertainty import axis_sigma_rad
 
 FloatArray = NDArray[np.float64]
@@ -52,12 +54,14 @@ def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple
     return face, normals
 
 
-def dense_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float) -> dict[str, float]:
-    """1-sigma bounds at the truth (the noise-free hits), in the result's units."""
+def dense_bound(
+    motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float, *, hits: NDArray[np.bool_] | None = None
+) -> dict[str, float]:
+    """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units."""
     truth = motion.at_reference(reference_time_s)
     x = truth.params()
     face, normals = face_of_hits(scene, motion, sim.reference_m)
-    keep = face >= 0
+    keep = face >= 0 if hits is None else (face >= 0) & hits
     xyz, face = sim.xyz_true_m[keep], face[keep]
     line_key = sim.frame[keep].astype(np.int64) * scene.scanner.lines + sim.line[keep]
     _, first, line = np.unique(line_key, return_index=True, return_inverse=True)
@@ -101,3 +105,15 @@ def dense_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
         "points": len(xyz),
         "faces": int(np.count_nonzero(np.any(F_ff != 0, axis=(1, 2)))),
     }
+
+
+def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float) -> NDArray[np.bool_]:
+    """The hits the dense fit can use: those in planar surfels, built as the estimator builds
+    them (cells of extent / 100) at the true motion. The rest lie near edges of faces and of
+    the view, where a cell may straddle two faces."""
+    frame = sim.frame.astype(np.int64)
+    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
+    tau = sim.t_s - reference_time_s
+    data = prepare(sim.xyz_m, tau, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION)
+    mapping = LineMapping(motion.at_reference(reference_time_s).params(), data.tau_s, tuple(range(9)))
+    return np.asarray(build_surfels(data, mapping, scene.scanner.noise).planar[data.cell])
