@@ -91,6 +91,8 @@ def test_bad_range_images_are_refused(dense: FrameCloud, tmp_path: Path) -> None
         ({**good, "t_s": good["t_s"][:, :3]}, MalformedInputError, "t_s must be"),
         ({**good, "range_m": np.where(good["range_m"] > 0, np.nan, 0)}, NonFiniteValueError, "range_m"),
         ({**good, "range_m": -good["range_m"]}, MalformedInputError, "negative"),
+        # A pickled array could run code when loaded: it is never unpickled.
+        ({**good, "t_s": good["t_s"].astype(object)}, MalformedInputError, "allow_pickle=False"),
     ]
     for i, (arrays, error, message) in enumerate(cases):
         np.savez(tmp_path / f"bad{i}.npz", **arrays)  # type: ignore[arg-type]

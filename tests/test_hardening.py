@@ -106,6 +106,23 @@ def test_size_limits_on_observations_and_points(url: str, tmp_path: Path) -> Non
         assert r.status_code == 422 and "limit is 2000" in r.json()["detail"]["message"]
 
 
+def test_an_npz_that_would_expand_past_the_limit_is_refused_unread(url: str, tmp_path: Path) -> None:
+    # 800 kB of zeros compress to a few kB; the archive's declared sizes give it away.
+    bomb = tmp_path / "bomb.npz"
+    arrays = {
+        "range_m": np.zeros((10, 100, 100)),
+        "t_s": np.zeros((10, 100)),
+        "azimuth_deg": np.zeros(100),
+        "elevation_deg": np.zeros(100),
+    }
+    np.savez_compressed(bomb, **arrays)  # type: ignore[arg-type]
+    assert bomb.stat().st_size < 20_000
+    with client(url, USER) as http:
+        r = http.post("/v1/jobs/upload", files={"file": ("frames.npz", bomb.read_bytes())})
+    detail = r.json()["detail"]
+    assert r.status_code == 422 and detail["code"] == "limit_exceeded" and "would expand to" in detail["message"]
+
+
 def test_a_job_over_its_time_limit_fails_clearly_and_frees_its_worker(url: str) -> None:
     with client(url, USER) as http:
         slow = http.post("/v1/jobs", json={"input": {"tracks": tracks()}, "options": SLOW}).json()["id"]
