@@ -1,15 +1,17 @@
 """Motion from dense line-scan frames, without feature tracks.
 
 Recipe:
-1. Register consecutive frames rigidly (FPFH + RANSAC + ICP); keep the pairs one cone motion
-   explains (:mod:`tumblescan.consensus`: a symmetric target can register onto a turned copy
-   of itself, a fast one often does).
-2. Re-time each frame to its mean time with that motion, register again by ICP (from the
-   predicted transform where a pair disagreed), and form the consensus again.
+1. Register consecutive frames rigidly (FPFH + RANSAC + ICP).
+2. Form a starting motion from the pairs, re-time each frame to its mean time with it,
+   register again by ICP, and form the start again. The first start is the closed-form cone
+   on the pairs whose rotation angle is near the median (every pair of one cone motion has
+   the same angle).
 3. Refine all 9 parameters by the dense continuous-time fit on every point (:mod:`tumblescan.dense`).
-   If the fit is poor (residuals many times their model sigma, or frames unmatched), or no
-   3 pairs agreed, start again from a particle swarm on a dense alignment cost
-   (:mod:`tumblescan.dense_search`) and keep the better fit.
+   If the fit is poor (residuals many times their model sigma, or frames unmatched), or the
+   start could not be formed, start again from the cone most triplets of pairs agree with
+   (:mod:`tumblescan.consensus`: a symmetric target can register onto a turned copy of
+   itself, a fast one often does), and then from a particle swarm on a dense alignment cost
+   (:mod:`tumblescan.dense_search`); keep the best fit.
 4. Choose the model: keep spin-precession unless the precession rate is not significantly
    different from 0 (Wald test at ``significance``); then refit spin-only.
 5. Validate (paper eq. 11): polish the motion on the first frames only and compare.
