@@ -114,6 +114,12 @@ def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     frame = sim.frame.astype(np.int64)
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
     tau = sim.t_s - reference_time_s
-    data = prepare(sim.xyz_m, tau, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION)
+    noise = scene.scanner.noise
+    data = prepare(
+        sim.xyz_m, tau, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION, range_sigma_m=noise.range_sigma_m
+    )
     mapping = LineMapping(motion.at_reference(reference_time_s).params(), data.tau_s, tuple(range(9)))
-    return np.asarray(build_surfels(data, mapping, scene.scanner.noise).planar[data.cell])
+    used = np.zeros(len(sim.xyz_m), dtype=bool)
+    kept = np.ones(len(used), dtype=bool) if data.kept is None else data.kept
+    used[kept] = build_surfels(data, mapping, noise).planar[data.cell]
+    return used

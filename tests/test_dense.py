@@ -14,11 +14,13 @@ import numpy as np
 import pytest
 
 from tumblescan import (
+    EstimateOptions,
     FrameCloud,
     Motion,
     MotionResult,
     Scanner,
     Scene,
+    SensorNoise,
     TimedCloud,
     assemble_frames,
     estimate_from_frames,
@@ -100,6 +102,37 @@ def test_a_displaced_frame_stands_out_in_the_residuals(simulated: tuple[Motion, 
     assert rms is not None
     values = np.array([np.nan if v is None else v for v in rms])
     assert int(np.nanargmax(values)) == 7, values
+
+
+def test_spurious_returns_do_not_spoil_the_motion(simulated: tuple[Motion, FrameCloud]) -> None:
+    # 10 % of the returns up to 3 m off along their ray: without leaving them out, no patch
+    # passes for planar and the fit has nothing to work on.
+    motion, sim = simulated
+    rng = np.random.default_rng(7)
+    bad = rng.random(len(sim.xyz_m)) < 0.10
+    xyz = sim.xyz_m.copy()
+    rho = np.linalg.norm(xyz[bad], axis=1, keepdims=True)
+    xyz[bad] *= (rho + rng.uniform(-3.0, 3.0, (int(bad.sum()), 1))) / rho
+    r = estimate_from_frames(assemble_frames(TimedCloud(xyz, sim.t_s, {"frame": sim.frame, "line": sim.line})))
+    truth = motion.canonical().at_reference(r.reference_time_s)
+    u = r.uncertainty
+    assert _angle_deg(r.spin.axis, truth.spin_axis) < 4 * u.spin_axis_deg < 0.5
+    assert abs(r.spin.rate_deg_s - np.degrees(truth.spin_rate_rad_s)) < 4 * u.spin_rate_deg_s < 0.1
+    assert abs(r.precession.rate_deg_s - np.degrees(truth.precession_rate_rad_s)) < 4 * u.precession_rate_deg_s
+    assert r.validation.passed
+    left_out = [w for w in r.warnings if "spurious returns" in w]
+    assert len(left_out) == 1 and int(left_out[0].split()[0]) > 0.6 * bad.sum()
+
+
+def test_frames_without_a_planar_patch_in_common_are_refused(simulated: tuple[Motion, FrameCloud]) -> None:
+    # Declared range noise of a micrometre: every patch of the 2 cm-noise frames is too thick
+    # to pass for planar, so nothing can be matched. Refused with a reason, not reported with
+    # zero uncertainty.
+    _, sim = simulated
+    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+    options = EstimateOptions(sensor=SensorNoise(range_sigma_m=1e-6, angle_sigma_arcsec=0.001))
+    with pytest.raises(InputError, match="no planar patch of one frame could be matched"):
+        estimate_from_frames(frames, options)
 
 
 def test_rectified_cloud_matches_the_truth_within_a_centimetre(
@@ -185,7 +218,7 @@ def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, e
 def test_cli_noise_overrides_reach_the_frames_estimator(frames_ply: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from typer.testing import CliRunner
 
-    from tumblescan import EstimateOptions, SensorNoise, cli
+    from tumblescan import cli
 
     seen: list[EstimateOptions] = []
 

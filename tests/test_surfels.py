@@ -86,3 +86,21 @@ def test_cells_across_an_edge_are_not_used() -> None:
     assert np.count_nonzero(mixed) > 10  # the ridge does cut cells
     assert not np.any(surf.planar & mixed)
     assert np.count_nonzero(surf.planar) > 0.7 * np.count_nonzero(data.interior)
+
+
+def test_spurious_returns_are_left_out_and_nothing_else() -> None:
+    # 5 % of the returns metres off along their ray (multipath, a stray reflection): each
+    # would make its cell fail the planarity tests. Every one of them is left out, and no
+    # return of the wall.
+    xyz, tau, _ = _wall(45.0, seed=4)
+    rng = np.random.default_rng(4)
+    bad = rng.random(len(xyz)) < 0.05
+    rho = np.linalg.norm(xyz[bad], axis=1, keepdims=True)
+    off = rng.choice([-1.0, 1.0], (int(bad.sum()), 1)) * rng.uniform(1.0, 3.0, (int(bad.sum()), 1))
+    dirty = xyz.copy()
+    dirty[bad] *= (rho + off) / rho
+    frame = np.zeros(len(xyz), np.int64)
+    clean = prepare(xyz, tau, frame, surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m)
+    kept = prepare(dirty, tau, frame, surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m).kept
+    assert clean.spurious == 0
+    assert kept is not None and np.array_equal(~kept, bad)

@@ -52,12 +52,19 @@ RETIME_PASSES = 2
 SURFEL_FRACTION = 1 / 100
 # A refined motion whose residuals are this many times their model sigma is wrong.
 POOR_SCALE = 3.0
+# Warn when more than this share of the points are left out as spurious returns.
+SPURIOUS_WARNING = 0.01
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
 
 class FramesUnusableError(InputError):
     code = "frames_unusable"
+
+
+class NoSurfacesError(FramesUnusableError):
+    """No planar patch matched across frames: a property of the data, not of the start, so
+    no other start is tried."""
 
 
 @dataclass(frozen=True)
@@ -134,14 +141,26 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     reg = _RegistrationPoints(cloud.xyz_m[thin], cloud.t_s[thin] - T, frames.frame[thin])
     per_frame = reg.split(reg.xyz_m, n_frames)
     extent = extent_m(per_frame)
-    data = prepare(cloud.xyz_m, cloud.t_s - T, frames.frame, surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION)
+    noise = opts.sensor or SensorNoise()
+    data = prepare(
+        cloud.xyz_m,
+        cloud.t_s - T,
+        frames.frame,
+        surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION,
+        range_sigma_m=noise.range_sigma_m,
+    )
     # 2-3. Register, initialize and refine on all frames, from up to three starts.
     progress("registering", 0.0)
     voxel = max(extent * VOXEL_FRACTION, 1e-3)
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
-    setup = _Setup(data, reg, mid, voxel, extent, opts, opts.sensor or SensorNoise(), progress)
+    setup = _Setup(data, reg, mid, voxel, extent, opts, noise, progress)
     main, warnings = _best_attempt(setup, global_pairs)
+    if data.spurious > SPURIOUS_WARNING * len(cloud):
+        warnings.append(
+            f"{data.spurious} points ({100 * data.spurious / len(cloud):.1f} %) were left out of the fit as spurious "
+            "returns (ranges far from the rest of their patch); they are rectified with the others"
+        )
     still_poor = _poor_fit(main.fit)
     if still_poor is not None:
         warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
@@ -187,6 +206,8 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, 
         attempt_warnings: list[str] = []
         try:
             alt = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
+        except NoSurfacesError:
+            raise
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
@@ -197,7 +218,7 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, 
             break
         tried.append(f"{path}: {poor}")
     if main is None:
-        raise FramesUnusableError("no start for the motion was found: " + "; ".join(tried), field="file")
+        raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
     if tried and main.path != attempts[0][1]:
         kept = [*kept, "the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}"]
     return main, kept
@@ -355,6 +376,12 @@ def _solve(setup: _Setup, pairs: PairTransforms, start: _Start, warnings: list[s
         seed=opts.seed,
         on_iteration=on_step,
     )
+    if fit.residuals == 0:
+        raise NoSurfacesError(
+            "no planar patch of one frame could be matched in another (are the frames of one rigid target, and "
+            "is the declared range noise right?)",
+            field="file",
+        )
     return _Solve(fit, guess, used, path)
 
 

@@ -66,6 +66,13 @@ class DenseData:
     extent_m: float
     interior: NDArray[np.bool_]
     neighbours: IntArray  # (m, 8) the cells around each in its frame's view, -1 where none
+    # The input's points kept (:func:`prepare` leaves spurious returns out); None: all of them.
+    kept: NDArray[np.bool_] | None = None
+
+    @property
+    def spurious(self) -> int:
+        """How many of the input's points were left out as spurious returns."""
+        return 0 if self.kept is None else int(np.sum(~self.kept))
 
     def first_frames(self, n: int) -> DenseData:
         """The same data restricted to frames ``0 .. n-1``."""
@@ -90,12 +97,16 @@ class DenseData:
         )
 
 
-def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: float) -> DenseData:
+def prepare(
+    xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: float, range_sigma_m: float | None = None
+) -> DenseData:
     """Group points into lines (distinct ``tau_s``) and surfels: per frame, cells of the
     sensor's view about ``surfel_m`` wide at the median range. Cells are cut in direction, not
     in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
-    surface keeps the points that noise pushed inside, and its centroid is biased off the surface."""
-    tau_u, line = np.unique(tau_s, return_inverse=True)
+    surface keeps the points that noise pushed inside, and its centroid is biased off the surface.
+    Given the sensor's ``range_sigma_m``, spurious returns (a range far outside the rest of its
+    cell's, :func:`_range_inliers`) are left out: a few of them make a cell fail every
+    planarity test."""
     az, el = azimuth_elevation(xyz_m)
     range_m = np.linalg.norm(xyz_m, axis=1)
     step = surfel_m / float(np.median(range_m))
@@ -104,11 +115,19 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
     f = frame.astype(np.int64)
     dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
     key = (f * dims[0] + a + 1) * dims[1] + e + 1
+    kept = (
+        np.ones(len(key), dtype=bool)
+        if range_sigma_m is None
+        else _range_inliers(np.unique(key, return_inverse=True)[1], range_m, range_sigma_m)
+    )
+    key, f, range_m = key[kept], f[kept], range_m[kept]
+    tau_u, line = np.unique(tau_s[kept], return_inverse=True)
     keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
+    xyz = np.asarray(xyz_m, dtype=float)[kept]
     return DenseData(
-        np.asarray(xyz_m, dtype=float),
+        xyz,
         f,
         line.astype(np.int64),
         tau_u,
@@ -116,10 +135,27 @@ def prepare(xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: 
         f[first],
         int(f.max()) + 1,
         surfel_m,
-        float(np.linalg.norm(np.ptp(xyz_m, axis=0))),
+        float(np.linalg.norm(np.ptp(xyz, axis=0))),
         _interior(neighbours, rho, max_step_m=MAX_RANGE_STEP * surfel_m),
         neighbours,
+        None if range_sigma_m is None else kept,
     )
+
+
+def _range_inliers(cell: IntArray, range_m: FloatArray, range_sigma_m: float) -> NDArray[np.bool_]:
+    """Points whose range lies within their cell's Tukey fences, widened by 3 range sigmas:
+    ``[q1 - 1.5 IQR - 3 s_r, q3 + 1.5 IQR + 3 s_r]``. A surface's own ranges, spread by its
+    slope and by noise, lie inside; a return metres off (multipath, a stray reflection) does
+    not. Cells of fewer than 4 points keep every point."""
+    order = np.lexsort((range_m, cell))
+    counts = np.bincount(cell)
+    starts = np.cumsum(counts) - counts
+    sorted_range = range_m[order]
+    q1 = sorted_range[starts + np.floor(0.25 * (counts - 1)).astype(np.int64)]
+    q3 = sorted_range[starts + np.ceil(0.75 * (counts - 1)).astype(np.int64)]
+    margin = 1.5 * (q3 - q1) + 3 * range_sigma_m
+    lo, hi = (q1 - margin)[cell], (q3 + margin)[cell]
+    return np.asarray(((range_m >= lo) & (range_m <= hi)) | (counts[cell] < 4))
 
 
 def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
