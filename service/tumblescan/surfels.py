@@ -115,23 +115,21 @@ def prepare(
     f = frame.astype(np.int64)
     dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
     key = (f * dims[0] + a + 1) * dims[1] + e + 1
-    kept = (
-        np.ones(len(key), dtype=bool)
-        if range_sigma_m is None
-        else _range_inliers(np.unique(key, return_inverse=True)[1], range_m, range_sigma_m)
-    )
-    key, f, range_m = key[kept], f[kept], range_m[kept]
-    tau_u, line = np.unique(tau_s[kept], return_inverse=True)
     keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
+    # The interior test reads every return's range, spurious or not: a cell across an
+    # occlusion stays off the interior even when its far minority is left out below.
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
+    kept = np.ones(len(key), dtype=bool) if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m)
+    # Every cell keeps its median return, so the cells (and their order) stay as they are.
+    tau_u, line = np.unique(tau_s[kept], return_inverse=True)
     xyz = np.asarray(xyz_m, dtype=float)[kept]
     return DenseData(
         xyz,
-        f,
+        f[kept],
         line.astype(np.int64),
         tau_u,
-        cell.astype(np.int64),
+        cell[kept].astype(np.int64),
         f[first],
         int(f.max()) + 1,
         surfel_m,
