@@ -52,8 +52,6 @@ RETIME_PASSES = 2
 SURFEL_FRACTION = 1 / 100
 # A refined motion whose residuals are this many times their model sigma is wrong.
 POOR_SCALE = 3.0
-# Warn when more than this share of the points are left out as spurious returns.
-SPURIOUS_WARNING = 0.01
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
@@ -156,7 +154,7 @@ def _estimate(frames: Frames, opts: EstimateOptions, progress: Progress) -> Moti
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
     setup = _Setup(data, reg, mid, voxel, extent, opts, noise, progress)
     main, warnings = _best_attempt(setup, global_pairs)
-    if data.spurious > SPURIOUS_WARNING * len(cloud):
+    if data.spurious:
         warnings.append(
             f"{data.spurious} points ({100 * data.spurious / len(cloud):.1f} %) were left out of the fit as spurious "
             "returns (ranges far from the rest of their patch); they are rectified with the others"

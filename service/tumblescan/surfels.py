@@ -32,6 +32,11 @@ MAX_THICKNESS_SIGMAS = 2.5
 MIN_SURFEL_POINTS = 6
 # Neighbouring cells of one surface differ in range by less than this many surfel sizes.
 MAX_RANGE_STEP = 4.0
+# Far returns (:func:`_range_inliers`) up to this share of the points are taken for the
+# minorities of cells across an occlusion (0.2 % of clean simulated frames) and kept: leaving
+# those out let cells at edges pass for planar, and on the 100 m bench error/sigma rose from
+# 1.04 to 1.16. More than this are spurious returns and are left out.
+SPURIOUS_MIN_SHARE = 0.01
 # The 8 cells around a cell, (azimuth, elevation) steps; the 4 that share a side with it.
 NEIGHBOUR_OFFSETS = tuple((da, de) for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de)
 SIDE_NEIGHBOURS = tuple(k for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if da == 0 or de == 0)
@@ -105,8 +110,8 @@ def prepare(
     in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
     surface keeps the points that noise pushed inside, and its centroid is biased off the surface.
     Given the sensor's ``range_sigma_m``, spurious returns (a range far outside the rest of its
-    cell's, :func:`_range_inliers`) are left out: a few of them make a cell fail every
-    planarity test."""
+    cell's, :func:`_range_inliers`) are left out when they are more than ``SPURIOUS_MIN_SHARE``
+    of the points: a few of them make a cell fail every planarity test."""
     az, el = azimuth_elevation(xyz_m)
     range_m = np.linalg.norm(xyz_m, axis=1)
     step = surfel_m / float(np.median(range_m))
@@ -121,6 +126,8 @@ def prepare(
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
     kept = np.ones(len(key), dtype=bool) if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m)
+    if np.mean(~kept) <= SPURIOUS_MIN_SHARE:
+        kept[:] = True
     # Every cell keeps its median return, so the cells (and their order) stay as they are.
     tau_u, line = np.unique(tau_s[kept], return_inverse=True)
     xyz = np.asarray(xyz_m, dtype=float)[kept]
