@@ -125,25 +125,26 @@ def prepare(
     # occlusion stays off the interior even when its far minority is left out below.
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
-    kept = np.ones(len(key), dtype=bool) if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m)
-    if np.mean(~kept) <= SPURIOUS_MIN_SHARE:
-        kept[:] = True
+    kept = None if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m)
+    if kept is not None and np.mean(~kept) <= SPURIOUS_MIN_SHARE:
+        kept = None
     # Every cell keeps its median return, so the cells (and their order) stay as they are.
-    tau_u, line = np.unique(tau_s[kept], return_inverse=True)
-    xyz = np.asarray(xyz_m, dtype=float)[kept]
+    sel = slice(None) if kept is None else kept
+    tau_u, line = np.unique(tau_s[sel], return_inverse=True)
+    xyz = np.asarray(xyz_m, dtype=float)[sel]
     return DenseData(
         xyz,
-        f[kept],
+        f[sel],
         line.astype(np.int64),
         tau_u,
-        cell[kept].astype(np.int64),
+        cell[sel].astype(np.int64),
         f[first],
         int(f.max()) + 1,
         surfel_m,
         float(np.linalg.norm(np.ptp(xyz, axis=0))),
         _interior(neighbours, rho, max_step_m=MAX_RANGE_STEP * surfel_m),
         neighbours,
-        None if range_sigma_m is None else kept,
+        kept,
     )
 
 
@@ -152,7 +153,10 @@ def _range_inliers(cell: IntArray, range_m: FloatArray, range_sigma_m: float) ->
     ``[q1 - 1.5 IQR - 3 s_r, q3 + 1.5 IQR + 3 s_r]``. A surface's own ranges, spread by its
     slope and by noise, lie inside; a return metres off (multipath, a stray reflection) does
     not. Cells of fewer than 4 points keep every point."""
-    order = np.lexsort((range_m, cell))
+    # Sorted by cell, then range: one key, the cell plus the range scaled into [0, 1) (twice as
+    # fast as a two-key lexsort on a million points).
+    span = float(np.ptp(range_m)) * (1 + 1e-9) + 1e-12
+    order = np.argsort(cell + (range_m - range_m.min()) / span)
     counts = np.bincount(cell)
     starts = np.cumsum(counts) - counts
     sorted_range = range_m[order]
