@@ -218,7 +218,7 @@ def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, e
 def test_cli_noise_overrides_reach_the_frames_estimator(frames_ply: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from typer.testing import CliRunner
 
-    from tumblescan import cli
+    from tumblescan.cli import linescan as cli
 
     seen: list[EstimateOptions] = []
 

@@ -15,9 +15,9 @@ from ..errors import InputError, LimitExceededError, MalformedInputError
 from ..estimate import EstimateOptions, estimate_motion
 from ..estimate_frames import estimate_from_frames
 from ..frames import read_frames
+from ..linescan.report import ReportInputs, build_report
 from ..motion import Motion
 from ..rectify import rectify
-from ..report import ReportInputs, build_report
 from ..result import MotionResult
 from ..tracks import Tracks
 from ..tracks_io import read_tracks, tracks_from_json

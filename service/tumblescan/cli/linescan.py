@@ -1,58 +1,33 @@
-"""Command line: ``tumblescan simulate | estimate | rectify`` (and the service commands).
-
-Bad input exits with code 2 and one line on stderr naming the problem.
-"""
+"""``tumblescan linescan-motion simulate | estimate | rectify`` (also at the top level)."""
 
 from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import typer
 
-from .cloud_io import TimedCloud, read_ply, write_ply
-from .errors import InputError
-from .estimate import EstimateOptions, estimate_motion
-from .estimate_frames import estimate_from_frames
-from .frames import read_frames
-from .rectify import rectify as rectify_points
-from .result import MotionResult
-from .sensor import Scanner, SensorNoise
-from .simulate import Scene, random_motion, simulate_frames, simulate_tracks
-from .tracks import Tracks
-from .tracks_io import read_tracks, write_tracks
-from .truth import motion_to_json
+from ..cloud_io import TimedCloud, read_ply, write_ply
+from ..errors import InputError
+from ..estimate import EstimateOptions, estimate_motion
+from ..estimate_frames import estimate_from_frames
+from ..frames import read_frames
+from ..rectify import rectify as rectify_points
+from ..result import MotionResult
+from ..sensor import Scanner, SensorNoise
+from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
+from ..tracks import Tracks
+from ..tracks_io import read_tracks, write_tracks
+from ..truth import motion_to_json
+from .common import input_errors
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="Tumbling-target motion from line-scan lidar.")
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def fail(message: str) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(code=2)
-
-
-def input_errors(fn: F) -> F:
-    """Turn bad input into exit code 2 and one line on stderr, never a traceback."""
-
-    @wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except InputError as exc:
-            raise fail(str(exc)) from None
-        except FileNotFoundError as exc:
-            raise fail(f"no such file: {exc.filename}") from None
-        except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
-            raise fail(str(exc)) from None
-
-    return wrapper  # type: ignore[return-value]
+app = typer.Typer(
+    add_completion=False, no_args_is_help=True, help="linescan-motion: spin and precession from line-scan lidar."
+)
 
 
 @app.command()
@@ -206,8 +181,8 @@ def estimate_frames_cli(path: Path, options: EstimateOptions, outputs: EstimateO
     write_ply(out, rectified_cloud)
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={result.reference_time_s} s", err=True)
     if outputs.report is not None:
-        from .jobs.linescan import load_truth
-        from .report import ReportInputs, build_report
+        from ..jobs.linescan import load_truth
+        from ..linescan.report import ReportInputs, build_report
 
         inputs = ReportInputs(
             result=result,
@@ -240,8 +215,8 @@ def rectify(
 
 def write_report(path: Path, result: MotionResult, tracks: Tracks, cloud: Path | None, truth: Path | None) -> None:
     """The same report the service writes for a job."""
-    from .jobs.linescan import load_truth
-    from .report import ReportInputs, build_report
+    from ..jobs.linescan import load_truth
+    from ..linescan.report import ReportInputs, build_report
 
     distorted = read_ply(cloud) if cloud is not None else None
     rectified = None
@@ -319,9 +294,3 @@ def _vec(v: Any, digits: int = 6) -> str:
 
 def main() -> None:
     app()
-
-
-# The service commands (serve, worker, submit, demo) live beside the core ones.
-from .cli_service import register  # noqa: E402
-
-register(app)

@@ -12,12 +12,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .cloud_io import TimedCloud
-from .motion import Motion
-from .rectify import rectify
-from .result import MotionResult
-from .tracks import Tracks
-from .truth import errors_against
+from ..cloud_io import TimedCloud
+from ..motion import Motion
+from ..rectify import rectify
+from ..report import figure_html, page, value_text
+from ..result import MotionResult
+from ..tracks import Tracks
+from ..truth import errors_against
 
 MAX_POINTS = 40_000
 
@@ -51,11 +52,8 @@ def frame_residuals(result: MotionResult, tracks: Tracks) -> tuple[NDArray[np.in
 
 def build_report(inputs: ReportInputs) -> str:
     """The report as one HTML document."""
-    import plotly.offline
-
     r = inputs.result
     parts = [
-        f"<h1>{html.escape(inputs.title)}</h1>",
         _job_header(inputs.job),
         _summary(r, inputs.truth),
         "<h2>Rectified cloud, axes and precession cone</h2>",
@@ -67,28 +65,7 @@ def build_report(inputs: ReportInputs) -> str:
     elif r.fit.frame_rms_m is not None:
         rms = np.array([np.nan if v is None else v for v in r.fit.frame_rms_m])
         parts += ["<h2>Surfel-to-plane residuals per frame (RMS)</h2>", _figure_residuals(np.arange(len(rms)), rms)]
-    body = "\n".join(parts)
-    script = plotly.offline.get_plotlyjs()
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{html.escape(inputs.title)}</title>
-<style>{CSS}</style>
-<script type="text/javascript">{script}</script>
-</head><body>
-{body}
-<footer>Tumblescan report; 1-sigma from the covariance of the maximum-likelihood fit.</footer>
-</body></html>
-"""
-
-
-CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1100px; color: #222; }
-table { border-collapse: collapse; margin: 0.5em 0 1em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; font-variant-numeric: tabular-nums; }
-th { background: #f3f3f3; }
-.warn { color: #a40; } .ok { color: #070; } .bad { color: #b00; font-weight: bold; }
-footer { margin-top: 2em; color: #777; font-size: 0.85em; }
-.note { color: #555; font-size: 0.9em; }
-"""
+    return page(inputs.title, parts)
 
 
 def _job_header(job: dict[str, Any] | None) -> str:
@@ -98,14 +75,6 @@ def _job_header(job: dict[str, Any] | None) -> str:
         f"<th>{html.escape(k)}</th><td data-field='job.{k}'>{html.escape(str(job.get(k)))}</td>" for k in job
     )
     return f"<table class='job'><tr>{cells}</tr></table>"
-
-
-def _v(v: Any, digits: int = 6) -> str:
-    if v is None:
-        return "n/a"
-    if isinstance(v, list | tuple):
-        return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
-    return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
 
 
 def _summary(r: MotionResult, truth: Motion | None) -> str:
@@ -129,7 +98,12 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
         ]  # fmt: skip
     rows.append(
         _Row(
-            "centre (m)", "precession.center_m", r.precession.center_m, _v(u.center_m, 4), t and t.center_m, "center_m"
+            "centre (m)",
+            "precession.center_m",
+            r.precession.center_m,
+            value_text(u.center_m, 4),
+            t and t.center_m,
+            "center_m",
         )
     )
     head = (
@@ -145,7 +119,7 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
         ("reference time (s)", "reference_time_s", f"{r.reference_time_s:.6f}"),
         ("validation", "validation.passed",
          f"{verdict} ({val.test}; frames {val.frames[0]} vs {val.frames[1]}; "
-         f"distance {_v(val.distance, 4)}, threshold {_v(val.threshold, 4)})"),
+         f"distance {value_text(val.distance, 4)}, threshold {value_text(val.threshold, 4)})"),
         ("fit", "fit.rms_residual_m",
          f"rms {r.fit.rms_residual_m * 1000:.2f} mm; {r.fit.observations} observations, {r.fit.tracks} tracks, "
          f"{r.fit.frames} frames, {r.fit.outliers} outliers"),
@@ -173,12 +147,11 @@ class _Row:
     error_key: str
 
     def html(self, errors: dict[str, float] | None) -> str:
-        cells = (
-            f"<th>{self.name}</th><td data-field='{self.field}'>{_v(self.value)}</td><td>{html.escape(self.sigma)}</td>"
-        )
+        value = value_text(self.value)
+        cells = f"<th>{self.name}</th><td data-field='{self.field}'>{value}</td><td>{html.escape(self.sigma)}</td>"
         if errors is not None:
             error = f"{errors[self.error_key]:.3g}" if self.error_key in errors else ""
-            cells += f"<td>{_v(_plain(self.true))}</td><td>{error}</td>"
+            cells += f"<td>{value_text(_plain(self.true))}</td><td>{error}</td>"
         return f"<tr>{cells}</tr>"
 
 
@@ -253,7 +226,7 @@ def _figure_3d(inputs: ReportInputs) -> str:
         updatemenus=[toggle] if len(clouds) == 2 else [],
         legend={"itemsizing": "constant"},
     )
-    div = fig.to_html(full_html=False, include_plotlyjs=False, div_id="view3d", config={"displaylogo": False})
+    div = figure_html(fig, "view3d")
     return f"<p class='note' data-field='decimation'>{html.escape('; '.join(notes))}</p>{div}"
 
 
@@ -298,4 +271,4 @@ def _figure_residuals(frames: NDArray[np.int64], rms: NDArray[np.float64]) -> st
     fig.update_layout(
         height=300, margin={"l": 50, "r": 10, "t": 10, "b": 40}, xaxis_title="frame", yaxis_title="RMS residual (mm)"
     )
-    return str(fig.to_html(full_html=False, include_plotlyjs=False, div_id="residuals", config={"displaylogo": False}))
+    return figure_html(fig, "residuals")

@@ -16,7 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
-from .settings import Settings
+from ..settings import Settings
 
 
 def _settings(**overrides: Any) -> Settings:
@@ -47,7 +47,7 @@ def serve(
     """Run the HTTP API with its worker pool (embedded SQLite queue and store by default)."""
     import uvicorn
 
-    from .api.app import create_app
+    from ..api.app import create_app
 
     _logging()
     s = _settings(
@@ -77,7 +77,7 @@ def worker(
     """Run queue workers (scale-out: on any machine sharing the store, queue and artifacts)."""
     import multiprocessing
 
-    from .jobs.queue import make_huey
+    from ..jobs.queue import make_huey
 
     _logging()
     overrides = {"workers": workers, "data_dir": data_dir, "redis_url": redis_url, "database_url": database_url}
@@ -107,9 +107,9 @@ def worker(
 
 def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
     """Worker heartbeat (for /readyz) and the reaper, beside a consumer, until it is gone."""
-    from .jobs.queue import make_huey
-    from .jobs.runtime import get_runtime
-    from .jobs.service import JobService
+    from ..jobs.queue import make_huey
+    from ..jobs.runtime import get_runtime
+    from ..jobs.service import JobService
 
     _logging()
     s = _settings(**overrides)
@@ -223,12 +223,12 @@ def demo(
 
     from tumblescan_client import Client
 
-    from .cloud_io import TimedCloud, read_ply, write_ply
-    from .report_text import comparison_table
-    from .result import MotionResult
-    from .simulate import Scene, random_motion, simulate_frames, simulate_tracks
-    from .tracks_io import write_tracks
-    from .truth import motion_to_json
+    from ..cloud_io import TimedCloud, read_ply, write_ply
+    from ..report_text import comparison_table
+    from ..result import MotionResult
+    from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
+    from ..tracks_io import write_tracks
+    from ..truth import motion_to_json
 
     out.mkdir(parents=True, exist_ok=True)
     port = port or _free_port()
