@@ -23,10 +23,10 @@ figure { margin: 0.5em 0; } figure img { max-width: 100%; image-rendering: pixel
 FOOTER = "Tumblescan report; 1-sigma from the covariance of the maximum-likelihood fit."
 
 
-def page(title: str, sections: Iterable[str], *, footer: str = FOOTER, plotly: bool = True) -> str:
+def page(title: str, sections: Iterable[str], *, footer: str = FOOTER, with_plotly: bool = True) -> str:
     """The whole document: ``sections`` are HTML fragments placed in order under the title."""
     script = ""
-    if plotly:
+    if with_plotly:
         import plotly.offline
 
         script = f'<script type="text/javascript">{plotly.offline.get_plotlyjs()}</script>'
