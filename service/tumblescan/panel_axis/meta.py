@@ -1,0 +1,192 @@
+"""The input contract ``tumblescan.panel_axis.input/1``: meta.json, validated once at the door.
+
+Every refusal is an ``InputError`` (code ``invalid_input``) whose ``field`` names the field at
+fault, e.g. ``camera.fx_px`` or ``pointing.R_cam_from_ref``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from .._typing import FloatArray
+from ..errors import InputError
+from ..imaging.camera import PinholeCamera
+from ..imaging.image_io import MAX_PIXELS, MIN_SIDE_PX
+from .frames import R_cam_from_enu
+
+INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
+_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class CameraMeta(BaseModel):
+    model_config = _STRICT
+
+    model: Literal["pinhole"] = "pinhole"
+    width_px: int = Field(ge=MIN_SIDE_PX)
+    height_px: int = Field(ge=MIN_SIDE_PX)
+    fx_px: float = Field(gt=0)
+    fy_px: float = Field(gt=0)
+    cx_px: float
+    cy_px: float
+    skew: float = 0.0
+    distortion: list[float] | None = None
+
+
+class AnglePointing(BaseModel):
+    model_config = _STRICT
+
+    frame: Literal["station_enu"] = "station_enu"
+    azimuth_deg: float
+    elevation_deg: float = Field(ge=-90, le=90)
+    roll_deg: float = 0.0
+
+
+class MatrixPointing(BaseModel):
+    model_config = _STRICT
+
+    frame: Literal["station_enu", "ecef"]
+    R_cam_from_ref: list[list[float]]
+
+
+class StationMeta(BaseModel):
+    model_config = _STRICT
+
+    lat_deg: float = Field(ge=-90, le=90)
+    lon_deg: float = Field(ge=-180, le=360)
+    height_m: float = 0.0
+
+
+class PriorMeta(BaseModel):
+    model_config = _STRICT
+
+    range_m: float | None = Field(None, gt=0)
+    panel_length_m: float | None = Field(None, gt=0)
+    panel_width_m: float | None = Field(None, gt=0)
+    wings: int = Field(2, ge=1, le=2)
+
+
+class PanelAxisInput(BaseModel):
+    """meta.json: the image's file name (relative to meta.json), the camera, and the optional
+    pointing, station and panel prior."""
+
+    model_config = _STRICT
+
+    schema_: str = Field(alias="schema")
+    image: str = "image.png"
+    camera: CameraMeta
+    pointing: AnglePointing | MatrixPointing | None = None
+    station: StationMeta | None = None
+    prior: PriorMeta | None = None
+
+    @property
+    def pinhole(self) -> PinholeCamera:
+        c = self.camera
+        dist = tuple(c.distortion) if c.distortion is not None else None
+        return PinholeCamera(c.width_px, c.height_px, c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.skew, dist)  # type: ignore[arg-type]
+
+    @property
+    def R_cam_from_ref(self) -> FloatArray | None:
+        """The pointing as a rotation (rows: camera axes in the reference frame), or None."""
+        p = self.pointing
+        if p is None:
+            return None
+        if isinstance(p, AnglePointing):
+            return R_cam_from_enu(p.azimuth_deg, p.elevation_deg, p.roll_deg)
+        return np.asarray(p.R_cam_from_ref, dtype=float)
+
+    @property
+    def prior_complete(self) -> bool:
+        """Whether the prior gives the panel's length and width (what IPPE needs)."""
+        return self.prior is not None and self.prior.panel_length_m is not None and self.prior.panel_width_m is not None
+
+
+def parse_meta(data: bytes | str, field: str = "meta") -> PanelAxisInput:
+    """Validate meta.json text; ``InputError`` naming the field otherwise."""
+    try:
+        raw = json.loads(data, parse_constant=_reject_constant)
+    except _NonFinite as exc:
+        raise InputError(f"{field}: {exc.args[0]} is not a finite number (JSON has no NaN/Infinity)", field=field) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
+    if not isinstance(raw, dict):
+        raise InputError(f"{field}: a JSON object is expected", field=field)
+    schema = raw.get("schema")
+    if schema != INPUT_SCHEMA:
+        raise InputError(f"schema: {schema!r} is not {INPUT_SCHEMA!r}", field="schema")
+    if isinstance(raw.get("pointing"), dict):  # pick the pointing form by its keys, for clear messages
+        raw["pointing"] = _pointing(raw["pointing"])
+    try:
+        meta = PanelAxisInput.model_validate(raw)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("AnglePointing", "MatrixPointing")))
+        loc = loc.replace("schema_", "schema")
+        raise InputError(f"{loc}: {err['msg']}", field=loc) from None
+    _check(meta)
+    return meta
+
+
+def read_meta(path: Path) -> PanelAxisInput:
+    """Read and validate meta.json from ``path``."""
+    if not path.is_file():
+        raise InputError(f"meta: no such file {path}", field="meta")
+    return parse_meta(path.read_bytes())
+
+
+class _NonFinite(Exception):
+    pass
+
+
+def _reject_constant(name: str) -> Any:
+    raise _NonFinite(name)
+
+
+def _pointing(p: dict[str, Any]) -> AnglePointing | MatrixPointing:
+    model: type[AnglePointing] | type[MatrixPointing] = MatrixPointing if "R_cam_from_ref" in p else AnglePointing
+    try:
+        return model.model_validate(p)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = "pointing." + ".".join(str(x) for x in err["loc"])
+        raise InputError(f"{loc}: {err['msg']}", field=loc) from None
+
+
+def _check(meta: PanelAxisInput) -> None:
+    c = meta.camera
+    if c.width_px * c.height_px > MAX_PIXELS:
+        raise InputError(f"camera: {c.width_px}x{c.height_px} px is over the 64 Mpx limit", field="camera.width_px")
+    if not -0.5 <= c.cx_px <= c.width_px - 0.5:
+        raise InputError(f"camera.cx_px: {c.cx_px} is outside the image [-0.5, {c.width_px - 0.5}]", field="camera.cx_px")
+    if not -0.5 <= c.cy_px <= c.height_px - 0.5:
+        raise InputError(f"camera.cy_px: {c.cy_px} is outside the image [-0.5, {c.height_px - 0.5}]", field="camera.cy_px")
+    if c.distortion is not None and len(c.distortion) != 5:
+        raise InputError(
+            f"camera.distortion: {len(c.distortion)} coefficients (OpenCV [k1, k2, p1, p2, k3] expected)",
+            field="camera.distortion",
+        )
+    if isinstance(meta.pointing, MatrixPointing):
+        R = np.asarray(meta.pointing.R_cam_from_ref, dtype=float)
+        if R.shape != (3, 3):
+            raise InputError("pointing.R_cam_from_ref: a 3x3 matrix is expected", field="pointing.R_cam_from_ref")
+        if np.abs(R @ R.T - np.eye(3)).max() > 1e-6 or not math.isclose(float(np.linalg.det(R)), 1.0, abs_tol=1e-6):
+            raise InputError(
+                "pointing.R_cam_from_ref: not a rotation (orthonormal to 1e-6 with determinant +1)",
+                field="pointing.R_cam_from_ref",
+            )
+
+
+def check_image_size(meta: PanelAxisInput, gray: FloatArray, field: str = "image") -> None:
+    """The image must be ``width_px`` x ``height_px``."""
+    h, w = gray.shape
+    c = meta.camera
+    if (w, h) != (c.width_px, c.height_px):
+        raise InputError(
+            f"camera.width_px/height_px: the image is {w}x{h} px, meta.json says {c.width_px}x{c.height_px}",
+            field="camera.width_px",
+        )
