@@ -1,0 +1,386 @@
+"""The panel axis from one image: the recipe.
+
+1. Segment the target (its box, elongation and tip width; degenerate views refused).
+2. LSD on the grayscale image; each segment refined to sub-pixel points and a line with its σ.
+3. Group the lines' back-projected planes into families of parallel 3D lines (RANSAC).
+4. The axis family is the longest one along the target's elongation; its direction is the
+   weighted least-squares null direction of its planes (IRLS), with a covariance.
+5. The short family (most orthogonal to the axis) gives L″, the panel normal and Table 2's
+   orthogonality.
+6. Perspective SNR: under the threshold the view is weak perspective, answered with the IPPE
+   mirror pair from one wing's corners and the panel prior, or with the in-image angle alone.
+7. Frames: camera -> station ENU -> ECEF, pitch/yaw by eq. 1, σ propagated.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .._typing import FloatArray, Progress, no_progress
+from ..imaging.camera import PinholeCamera
+from .axis import DirectionFit, PlaneObs, angle_between_lines_deg, fit_direction, fit_with_orthogonal
+from .edges import Edge, Family, find_edges, group_families
+from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
+from .frames import R_ecef_from_enu, canonical, pitch_yaw_deg, pitch_yaw_jacobian
+from .meta import MatrixPointing, PanelAxisInput
+from .options import EstimateOptions
+from .paper import estimate_paper
+from .result import Axis, Candidate, Direction, Observability, Panel, PanelAxisResult, Segmentation
+from .segment import Target, find_target
+from .weak import ippe_candidates, wing_corners
+
+MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
+MIN_TIP_WIDTH_PX = 4.0  # under it the panel is seen edge-on
+MIN_AXIS_EXTENT_PX = 30.0
+ELONGATION_ALIGN_DEG = 20.0
+
+
+def estimate_axis(
+    gray: FloatArray, meta: PanelAxisInput, options: EstimateOptions | None = None, progress: Progress = no_progress
+) -> PanelAxisResult:
+    """Estimate the panel axis from a grayscale image (DN, float (H, W)) and its validated meta.json."""
+    options = options or EstimateOptions()
+    t0 = time.perf_counter()
+    camera = meta.pinhole
+    frames = _Frames(meta)
+    full_scale = 255.0 if gray.max() <= 255 else 65535.0
+    if options.method == "paper":
+        return _paper_result(gray, camera, frames, options, t0)
+    rng = np.random.default_rng(options.seed)
+    # 1. The target region, and the views no edge can save.
+    progress("segment", 0.1)
+    target = find_target(gray, full_scale)
+    if target.elongation < MIN_ELONGATION:
+        raise DegenerateViewError(
+            f"image: the target is not elongated (ratio {target.elongation:.2f}, {MIN_ELONGATION} needed): no wing is "
+            "seen along its axis (an end-on or edge-on view)",
+            field="image",
+        )
+    if target.tip_width_px < MIN_TIP_WIDTH_PX:
+        raise DegenerateViewError(
+            f"image: the wings are {target.tip_width_px:.1f} px wide: the panel is seen edge-on", field="image"
+        )
+    # 2. Sub-pixel edges on the grayscale image.
+    progress("edges", 0.3)
+    edges = find_edges(gray, target, camera)
+    long_edges = [e for e in edges if e.length_px >= options.min_line_px]
+    if len(long_edges) < 2:
+        raise TooFewEdgesError(
+            f"image: {len(long_edges)} straight edges of {options.min_line_px:.0f} px or more (2 needed)", field="image"
+        )
+    # 3-4. Families of parallel lines; the axis family and its direction.
+    progress("families", 0.5)
+    families = group_families(edges, camera, rng)
+    axis_family = _axis_family(families, target, options.min_line_px)
+    if axis_family is None:
+        raise TooFewEdgesError("image: no two long edges share a 3D direction along the target", field="image")
+    extent = _extent(axis_family)
+    if extent < MIN_AXIS_EXTENT_PX:
+        raise DegenerateViewError(f"image: the projected axis is {extent:.0f} px long (30 px needed)", field="image")
+    fit = fit_direction([e.plane for e in axis_family.edges])
+    # 5. The short family and orthogonality (separate fits), then the axis refitted with every
+    # family that is orthogonal to it within its σ.
+    short_family, short_fit = _short_family(families, axis_family, fit.direction)
+    orthogonal = _orthogonal_families(families, axis_family, fit)
+    separate = fit
+    if orthogonal:
+        fit = fit_with_orthogonal(fit, [e.plane for e in axis_family.edges], orthogonal)
+    # 6. Perspective SNR and the answer it allows.
+    progress("axis", 0.8)
+    a_img = axis_family.image_direction()
+    snr = _perspective_snr(axis_family, a_img, camera)
+    weak = snr < options.weak_snr
+    plane_normal = _axis_plane_normal(axis_family, a_img, camera)
+    warnings = []
+    if target.touches_border:
+        warnings.append("target_touches_border")
+    if target.saturated_px > 0.005 * target.target_px:
+        warnings.append("saturated")
+    candidates: list[Candidate] = []
+    corners = None
+    if weak:
+        warnings.append("weak_perspective")
+        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options)
+    else:
+        axis = frames.axis(fit.direction, fit.cov_tangent_rad2, fit.basis)
+    image_angle = float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0)
+    # 7. The result.
+    tilt, sigma_tilt = _tilt(fit, camera, axis_family) if not weak else (None, None)
+    return PanelAxisResult(
+        method="ours",
+        axis=axis,
+        ambiguous=weak,
+        candidates=candidates,
+        image_angle_deg=image_angle,
+        sigma_image_angle_deg=_sigma_image_angle_deg(axis_family),
+        axis_plane_normal=frames.direction(plane_normal),
+        observability=Observability(
+            regime="weak_perspective" if weak else "perspective",
+            perspective_snr=snr,
+            tilt_deg=tilt,
+            sigma_tilt_deg=sigma_tilt,
+        ),
+        panel=_panel(separate, axis_family, short_family, short_fit, frames, corners),
+        segmentation=Segmentation(
+            threshold=target.threshold,
+            target_px=target.target_px,
+            bbox_px=list(target.bbox_px),
+            elongation=target.elongation,
+            tip_width_px=target.tip_width_px,
+        ),
+        warnings=warnings,
+        timings_ms={"total": 1000 * (time.perf_counter() - t0)},
+    )
+
+
+class _Frames:
+    """Turns camera-frame directions into the input's frames (station ENU, ECEF), signed as lines."""
+
+    def __init__(self, meta: PanelAxisInput) -> None:
+        R = meta.R_cam_from_ref
+        self.R_cam_from_enu: FloatArray | None = None
+        self.R_ecef_from_enu: FloatArray | None = None
+        self.R_cam_from_ecef: FloatArray | None = None
+        if meta.station is not None:
+            self.R_ecef_from_enu = R_ecef_from_enu(meta.station.lat_deg, meta.station.lon_deg)
+        if R is None:
+            return
+        if isinstance(meta.pointing, MatrixPointing) and meta.pointing.frame == "ecef":
+            self.R_cam_from_ecef = R
+            if self.R_ecef_from_enu is not None:
+                self.R_cam_from_enu = R @ self.R_ecef_from_enu
+        else:
+            self.R_cam_from_enu = R
+            if self.R_ecef_from_enu is not None:
+                self.R_cam_from_ecef = R @ self.R_ecef_from_enu.T
+
+    def signed(self, d_cam: FloatArray) -> FloatArray:
+        """``d_cam`` signed as the line's canonical station vector (North >= 0), else camera x >= 0."""
+        d = np.asarray(d_cam, dtype=float) / np.linalg.norm(d_cam)
+        if self.R_cam_from_enu is not None:
+            return d if (self.R_cam_from_enu.T @ d)[1] >= 0 else -d
+        if self.R_cam_from_ecef is not None:
+            return d if (self.R_cam_from_ecef.T @ d)[1] >= 0 else -d
+        return canonical(d, 0)
+
+    def direction(self, d_cam: FloatArray) -> Direction:
+        d = self.signed(d_cam)
+        enu = self.R_cam_from_enu.T @ d if self.R_cam_from_enu is not None else None
+        ecef = self.R_cam_from_ecef.T @ d if self.R_cam_from_ecef is not None else None
+        return Direction(
+            camera=d.tolist(),
+            station_enu=canonical(enu, 1).tolist() if enu is not None else None,
+            ecef=canonical(ecef, 1).tolist() if ecef is not None else None,
+        )
+
+    def axis(self, d_cam: FloatArray, cov: FloatArray, basis_cam: FloatArray) -> Axis:
+        dd = self.direction(d_cam)
+        out = Axis(camera=dd.camera, station_enu=dd.station_enu, ecef=dd.ecef)
+        out.sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
+        out.cov_tangent_rad2 = np.asarray(cov).tolist()
+        out.tangent_basis_camera = np.asarray(basis_cam).tolist()
+        for name, vec, R in (("", dd.station_enu, self.R_cam_from_enu), ("_ecef", dd.ecef, self.R_cam_from_ecef)):
+            if vec is None or R is None:
+                continue
+            L = np.asarray(vec)
+            pitch, yaw = pitch_yaw_deg(L)
+            setattr(out, f"pitch{name}_deg", pitch)
+            setattr(out, f"yaw{name}_deg", yaw)
+            if name == "":
+                basis = np.asarray(basis_cam) @ R  # rows: basis vectors in ENU
+                out.tangent_basis_enu = basis.tolist()
+                J = pitch_yaw_jacobian(L, basis)
+                c = J @ cov @ J.T
+                out.sigma_pitch_deg = float(np.degrees(np.sqrt(max(c[0, 0], 0.0))))
+                out.sigma_yaw_deg = float(np.degrees(np.sqrt(max(c[1, 1], 0.0))))
+        return out
+
+
+def _axis_family(families: list[Family], target: Target, min_line_px: float) -> Family | None:
+    """The family with the most edge length along the target's elongation (2+ edges, one long)."""
+    best, best_score = None, 0.0
+    for fam in families:
+        if len(fam.edges) < 2 or max(e.length_px for e in fam.edges) < min_line_px:
+            continue
+        score = sum(
+            e.length_px for e in fam.edges if abs(e.line.direction @ target.direction) > np.cos(np.radians(ELONGATION_ALIGN_DEG))
+        )
+        if score > best_score:
+            best, best_score = fam, score
+    return best
+
+
+def _extent(family: Family) -> float:
+    a = family.image_direction()
+    s = np.array([a @ p for e in family.edges for p in e.line.endpoints_px])
+    return float(np.ptp(s))
+
+
+def _short_family(
+    families: list[Family], axis_family: Family, d: FloatArray
+) -> tuple[Family | None, DirectionFit | None]:
+    """The family within 10° of orthogonal to the axis with the most edge length."""
+    best = None
+    for fam in families:
+        if fam is axis_family or len(fam.edges) < 2:
+            continue
+        if angle_between_lines_deg(fam.direction, d) < 80.0:
+            continue
+        if best is None or fam.total_length_px > best.total_length_px:
+            best = fam
+    if best is None:
+        return None, None
+    return best, fit_direction([e.plane for e in best.edges])
+
+
+def _orthogonal_families(
+    families: list[Family], axis_family: Family, fit: DirectionFit
+) -> list[tuple[DirectionFit, list[PlaneObs]]]:
+    """Families of 3+ edges whose direction is orthogonal to the axis within 3σ (both fits) plus 0.5°
+    (two edges always fit a direction exactly, so a pair cannot show it is a family)."""
+    out = []
+    for fam in families:
+        if fam is axis_family or len(fam.edges) < 3:
+            continue
+        f2 = fit_direction([e.plane for e in fam.edges])
+        tol = np.radians(0.5) + 3 * np.hypot(fit.sigma_rad, f2.sigma_rad)
+        if abs(float(f2.direction @ fit.direction)) < np.sin(tol):
+            out.append((f2, [e.plane for e in fam.edges]))
+    return out
+
+
+def _perspective_snr(family: Family, a_img: FloatArray, camera: PinholeCamera) -> float:
+    """(largest separation of the family's lines / f) / their median angle σ."""
+    b = np.array([-a_img[1], a_img[0]])
+    offsets = np.array([b @ e.line.centroid_px for e in family.edges])
+    sep = float(np.ptp(offsets))
+    sig = float(np.median([np.sqrt(e.line.var_angle_rad2) for e in family.edges]))
+    return (sep / camera.focal_px) / max(sig, 1e-12)
+
+
+def _axis_plane_normal(family: Family, a_img: FloatArray, camera: PinholeCamera) -> FloatArray:
+    """The plane {line of sight, axis}: through the camera and the family's mean image line."""
+    w = np.array([e.length_px for e in family.edges])
+    c = (w[:, None] * np.array([e.line.centroid_px for e in family.edges])).sum(axis=0) / w.sum()
+    n2 = np.array([-a_img[1], a_img[0]])
+    return camera.plane_normal(np.array([n2[0], n2[1], -n2 @ c]))
+
+
+def _sigma_image_angle_deg(family: Family) -> float:
+    info = sum(1.0 / max(e.line.var_angle_rad2, 1e-18) for e in family.edges)
+    return float(np.degrees(np.sqrt(1.0 / info)))
+
+
+def _tilt(fit: DirectionFit, camera: PinholeCamera, family: Family) -> tuple[float, float]:
+    """The axis's angle out of the plane ⟂ the line of sight (deg) and its σ."""
+    w = np.array([e.length_px for e in family.edges])
+    c = (w[:, None] * np.array([e.line.centroid_px for e in family.edges])).sum(axis=0) / w.sum()
+    los = camera.rays(c)[0]
+    d = fit.direction
+    tilt = float(np.degrees(np.arcsin(min(1.0, abs(float(d @ los))))))
+    g = los - (d @ los) * d  # gradient of d·los on the sphere
+    gt = fit.basis @ g
+    var = float(gt @ fit.cov_tangent_rad2 @ gt) / max(1e-12, 1 - (d @ los) ** 2)
+    return tilt, float(np.degrees(np.sqrt(max(var, 0.0))))
+
+
+def _weak_answer(
+    meta: PanelAxisInput,
+    family: Family,
+    edges: list[Edge],
+    camera: PinholeCamera,
+    frames: _Frames,
+    rng: np.random.Generator,
+    options: EstimateOptions,
+) -> tuple[Axis | None, list[Candidate], FloatArray | None]:
+    """Weak perspective: the IPPE pair with the prior, else no axis (or a refusal)."""
+    if not meta.prior_complete:
+        if options.require_axis:
+            raise DepthUnobservableError(
+                "prior: weak perspective (the edges' planes meet at the line of sight): the axis's tilt needs "
+                "prior.panel_length_m and prior.panel_width_m",
+                field="prior",
+            )
+        return None, [], None
+    assert meta.prior is not None and meta.prior.panel_length_m is not None and meta.prior.panel_width_m is not None
+    found = wing_corners(family, edges)
+    if found is None:
+        if options.require_axis:
+            raise DepthUnobservableError("image: weak perspective and no wing's four corners were found", field="image")
+        return None, [], None
+    corners, sigma_px = found
+    poses = ippe_candidates(corners, meta.prior.panel_length_m, meta.prior.panel_width_m, camera, sigma_px, rng)
+    if not poses:
+        return None, [], corners
+    cands = []
+    for k, pose in enumerate(poses[:2]):
+        dd = frames.direction(pose.axis_cam)
+        sig = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(pose.cov_tangent_rad2).max(), 0.0))))
+        cands.append(
+            Candidate(
+                kind="primary" if k == 0 else "mirror",
+                camera=dd.camera,
+                station_enu=dd.station_enu,
+                ecef=dd.ecef,
+                cost=pose.cost_px,
+                sigma_deg=sig,
+            )
+        )
+    best = poses[0]
+    return frames.axis(best.axis_cam, best.cov_tangent_rad2, best.basis), cands, corners
+
+
+def _panel(
+    fit: DirectionFit,
+    family: Family,
+    short_family: Family | None,
+    short_fit: DirectionFit | None,
+    frames: _Frames,
+    corners: FloatArray | None,
+) -> Panel:
+    rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
+    panel = Panel(
+        edge_rms_px=rms,
+        edges_px=[e.line.endpoints_px.ravel().tolist() for e in family.edges],
+        long_edges=len(family.edges),
+        wing_corners_px=corners.tolist() if corners is not None else None,
+    )
+    if short_family is not None and short_fit is not None:
+        panel.short_axis = frames.direction(short_fit.direction)
+        panel.normal = frames.direction(np.cross(fit.direction, short_fit.direction))
+        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short_fit.direction))
+        panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
+        panel.short_edges = len(short_family.edges)
+    return panel
+
+
+def _paper_result(
+    gray: FloatArray, camera: PinholeCamera, frames: _Frames, options: EstimateOptions, t0: float
+) -> PanelAxisResult:
+    pf = estimate_paper(gray, camera, options.min_line_px)
+    axis = frames.axis(pf.axis_cam, np.zeros((2, 2)), np.zeros((2, 3)))
+    axis.sigma_deg = axis.sigma_pitch_deg = axis.sigma_yaw_deg = None
+    axis.cov_tangent_rad2 = axis.tangent_basis_enu = axis.tangent_basis_camera = None
+    uv = camera.project(np.atleast_2d(pf.axis_cam * np.sign(pf.axis_cam[2] or 1.0)))  # direction of the image line
+    seg = pf.edges_px[0]
+    a_img = (seg[2:] - seg[:2]) / np.linalg.norm(seg[2:] - seg[:2])
+    del uv
+    mid = (pf.edges_px[:, :2] + pf.edges_px[:, 2:]).mean(axis=0) / 2
+    n2 = np.array([-a_img[1], a_img[0]])
+    panel = Panel(edges_px=pf.edges_px.tolist(), long_edges=2)
+    if pf.short_cam is not None:
+        panel.short_axis = frames.direction(pf.short_cam)
+        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(pf.axis_cam, pf.short_cam))
+    return PanelAxisResult(
+        method="paper",
+        axis=axis,
+        ambiguous=False,
+        image_angle_deg=float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0),
+        axis_plane_normal=frames.direction(camera.plane_normal(np.array([n2[0], n2[1], -n2 @ mid]))),
+        observability=Observability(regime="perspective"),
+        panel=panel,
+        segmentation=Segmentation(threshold=pf.threshold, target_px=pf.target_px),
+        timings_ms={"total": 1000 * (time.perf_counter() - t0)},
+    )
