@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tumblescan import MotionResult, read_ply
-from tumblescan.truth import errors_against, motion_from_json
+from tumblescan.linescan.truth import errors_against, motion_from_json
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:

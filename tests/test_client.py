@@ -17,7 +17,7 @@ from fastapi import FastAPI
 from fastapi.responses import JSONResponse
 
 from tumblescan import TimedCloud, read_ply, tracks_to_json, write_ply
-from tumblescan.tracks_io import write_tracks
+from tumblescan.linescan.tracks_io import write_tracks
 from tumblescan_client import (
     APIConnectionError,
     AsyncClient,

@@ -32,7 +32,7 @@ from tumblescan import (
     write_ply,
 )
 from tumblescan.errors import InputError
-from tumblescan.surfels import prepare
+from tumblescan.linescan.dense.surfels import prepare
 
 from .live import serve
 

@@ -7,7 +7,7 @@ import pytest
 
 from tumblescan import EstimateOptions, Motion, Scene, SwarmConfig, Tracks, estimate_motion, simulate_tracks
 from tumblescan.errors import InvalidOptionError
-from tumblescan.truth import errors_against
+from tumblescan.linescan.truth import errors_against
 
 from .conftest import motion_for, tracks_for
 

@@ -22,12 +22,12 @@ from tumblescan import (
     random_motion,
     simulate_frames,
 )
-from tumblescan.consensus import cone_consensus
-from tumblescan.dense_search import OverlapCost, swarm_start
-from tumblescan.initializer import InitializerError
-from tumblescan.motion import canonical_params, rotation_matrices
-from tumblescan.registration import extent_m
-from tumblescan.truth import angle_deg, errors_against
+from tumblescan.linescan.dense.consensus import cone_consensus
+from tumblescan.linescan.dense.registration import extent_m
+from tumblescan.linescan.dense.search import OverlapCost, swarm_start
+from tumblescan.linescan.initializer import InitializerError
+from tumblescan.linescan.truth import angle_deg, errors_against
+from tumblescan.target.motion import canonical_params, rotation_matrices
 
 MOTION = Motion.from_degrees(
     spin_axis=(0.3, -0.5, 0.8),

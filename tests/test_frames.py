@@ -15,7 +15,7 @@ from tumblescan.errors import (
     TimeOrderError,
     TooFewFramesError,
 )
-from tumblescan.frames import assemble_frames, read_range_images
+from tumblescan.linescan.frames import assemble_frames, read_range_images
 
 from .conftest import motion_for
 

@@ -29,7 +29,7 @@ from tumblescan.errors import (
     TooFewTracksError,
     UnknownFieldError,
 )
-from tumblescan.tracks import infer_frames
+from tumblescan.linescan.tracks import infer_frames
 
 from .conftest import tracks_for
 

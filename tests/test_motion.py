@@ -5,15 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tumblescan.motion import (
-    Motion,
-    canonical_params,
-    predict,
-    rotate,
-    rotation_matrix,
-    to_reference,
-    transport,
-)
+from tumblescan.geometry.rotations import rotate, rotation_matrix
+from tumblescan.target.motion import Motion, canonical_params, predict, to_reference, transport
 
 angles = st.floats(-10, 10, allow_nan=False)
 params = st.lists(st.floats(-5, 5, allow_nan=False), min_size=9, max_size=9).map(np.array)

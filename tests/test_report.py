@@ -15,8 +15,8 @@ import httpx
 import pytest
 
 from tumblescan import Scanner, Scene, TimedCloud, simulate_frames, simulate_tracks, write_ply
-from tumblescan.tracks_io import write_tracks
-from tumblescan.truth import motion_to_json
+from tumblescan.linescan.tracks_io import write_tracks
+from tumblescan.linescan.truth import motion_to_json
 
 from .browser import browser_page
 from .conftest import motion_for

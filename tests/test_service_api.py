@@ -23,8 +23,8 @@ from tumblescan import (
     tracks_to_json,
     write_ply,
 )
-from tumblescan.tracks_io import write_tracks
-from tumblescan.truth import errors_against
+from tumblescan.linescan.tracks_io import write_tracks
+from tumblescan.linescan.truth import errors_against
 
 from .conftest import tracks_for
 from .live import serve, wait_job

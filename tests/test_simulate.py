@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 
 from tumblescan import Scanner, Scene, simulate_frames, simulate_tracks
-from tumblescan.sensor import azimuth_elevation
+from tumblescan.linescan.sensor import azimuth_elevation
 
 from .conftest import motion_for
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tumblescan.sensor import SensorNoise
-from tumblescan.surfels import LineMapping, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, prepare
+from tumblescan.linescan.sensor import SensorNoise
 
 NOISE = SensorNoise()  # Table 1: 2 cm along the line of sight, 36 arcsec across it
 

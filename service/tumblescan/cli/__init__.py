@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import typer
 
-from . import linescan, service
+from ..cli import linescan, service
 
 app = typer.Typer(
     add_completion=False,

@@ -11,18 +11,19 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import typer
 
-from ..cloud_io import TimedCloud, read_ply, write_ply
 from ..errors import InputError
-from ..estimate import EstimateOptions, estimate_motion
-from ..estimate_frames import estimate_from_frames
-from ..frames import read_frames
-from ..rectify import rectify as rectify_points
-from ..result import MotionResult
-from ..sensor import Scanner, SensorNoise
-from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
-from ..tracks import Tracks
-from ..tracks_io import read_tracks, write_tracks
-from ..truth import motion_to_json
+from ..io.ply import TimedCloud, read_ply, write_ply
+from ..linescan.dense.estimate import estimate_from_frames
+from ..linescan.frames import read_frames
+from ..linescan.options import EstimateOptions
+from ..linescan.rectify import rectify as rectify_points
+from ..linescan.result import MotionResult
+from ..linescan.sensor import Scanner, SensorNoise
+from ..linescan.simulate import Scene, random_motion, simulate_frames, simulate_tracks
+from ..linescan.sparse.estimate import estimate_motion
+from ..linescan.tracks import Tracks
+from ..linescan.tracks_io import read_tracks, write_tracks
+from ..linescan.truth import motion_to_json
 from .common import input_errors
 
 app = typer.Typer(
@@ -181,8 +182,8 @@ def estimate_frames_cli(path: Path, options: EstimateOptions, outputs: EstimateO
     write_ply(out, rectified_cloud)
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={result.reference_time_s} s", err=True)
     if outputs.report is not None:
-        from ..jobs.linescan import load_truth
         from ..linescan.report import ReportInputs, build_report
+        from ..linescan.truth import load_truth
 
         inputs = ReportInputs(
             result=result,
@@ -215,8 +216,8 @@ def rectify(
 
 def write_report(path: Path, result: MotionResult, tracks: Tracks, cloud: Path | None, truth: Path | None) -> None:
     """The same report the service writes for a job."""
-    from ..jobs.linescan import load_truth
     from ..linescan.report import ReportInputs, build_report
+    from ..linescan.truth import load_truth
 
     distorted = read_ply(cloud) if cloud is not None else None
     rectified = None

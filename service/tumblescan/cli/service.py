@@ -223,12 +223,12 @@ def demo(
 
     from tumblescan_client import Client
 
-    from ..cloud_io import TimedCloud, read_ply, write_ply
-    from ..report_text import comparison_table
-    from ..result import MotionResult
-    from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
-    from ..tracks_io import write_tracks
-    from ..truth import motion_to_json
+    from ..io.ply import TimedCloud, read_ply, write_ply
+    from ..linescan.report_text import comparison_table
+    from ..linescan.result import MotionResult
+    from ..linescan.simulate import Scene, random_motion, simulate_frames, simulate_tracks
+    from ..linescan.tracks_io import write_tracks
+    from ..linescan.truth import motion_to_json
 
     out.mkdir(parents=True, exist_ok=True)
     port = port or _free_port()
