@@ -15,6 +15,7 @@ import pytest
 
 from tumblescan import (
     EstimateOptions,
+    FramesOptions,
     FrameCloud,
     Motion,
     MotionResult,
@@ -218,19 +219,20 @@ def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, e
 def test_cli_noise_overrides_reach_the_frames_estimator(frames_ply: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from typer.testing import CliRunner
 
-    from tumblescan.cli import linescan as cli
+    from tumblescan.cli import app
+    from tumblescan.linescan.dense import estimate as frames_estimator
 
-    seen: list[EstimateOptions] = []
+    seen: list[FramesOptions] = []
 
     class SeenError(Exception):
         pass
 
-    def spy(frames: object, options: EstimateOptions) -> MotionResult:
+    def spy(frames: object, options: FramesOptions, **_: object) -> MotionResult:
         seen.append(options)
         raise SeenError
 
-    monkeypatch.setattr(cli, "estimate_from_frames", spy)
-    run = CliRunner().invoke(cli.app, ["estimate", str(frames_ply), "--range-sigma-m", "0.05", "--seed", "3"])
+    monkeypatch.setattr(frames_estimator, "estimate_from_frames", spy)
+    run = CliRunner().invoke(app, ["estimate", str(frames_ply), "--range-sigma-m", "0.05", "--seed", "3"])
     assert isinstance(run.exception, SeenError)
     assert seen[0].sensor == SensorNoise(range_sigma_m=0.05, angle_sigma_arcsec=SensorNoise().angle_sigma_arcsec)
     assert seen[0].seed == 3

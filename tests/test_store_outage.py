@@ -73,7 +73,8 @@ def test_submissions_get_503_while_postgres_restarts_and_all_jobs_complete(tmp_p
                 assert 503 in statuses and statuses[-1] == 202
                 with httpx.Client(base_url=url, timeout=30) as http:
                     for job_id in accepted:
-                        assert wait_job(http, job_id, timeout_s=240)["status"] == "succeeded"
+                        done = wait_job(http, job_id, timeout_s=240)
+                        assert done["status"] == "succeeded", done
         finally:
             stop_load.set()
             if not pg_up():
