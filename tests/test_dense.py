@@ -15,8 +15,8 @@ import pytest
 
 from tumblescan import (
     EstimateOptions,
-    FramesOptions,
     FrameCloud,
+    FramesOptions,
     Motion,
     MotionResult,
     Scanner,
