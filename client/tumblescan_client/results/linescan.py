@@ -72,4 +72,4 @@ class MotionResult(_Model):
     fit: Fit
     validation: Validation
     solver: Solver
-    warnings: list[str]
+    warnings: list[str] = []

@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import LimitExceededError, MalformedInputError, NonFiniteValueError, TimeOrderError, TooFewFramesError
+from ..errors import LimitExceededError, MalformedInputError, NonFiniteValueError, TimeOrderError
 from ..io.ply import TimedCloud, check_line_times, read_ply
+from .errors import TooFewFramesError
 from .sensor import directions
 from .tracks import MIN_FRAMES
 

@@ -14,15 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import (
-    DuplicateObservationError,
-    MalformedInputError,
-    NonFiniteValueError,
-    SingleObservationTrackError,
-    TimeOrderError,
-    TooFewFramesError,
-    TooFewTracksError,
-)
+from ..errors import MalformedInputError, NonFiniteValueError, TimeOrderError
+from .errors import DuplicateObservationError, SingleObservationTrackError, TooFewFramesError, TooFewTracksError
 from .sensor import SensorNoise
 
 MIN_FRAMES = 4

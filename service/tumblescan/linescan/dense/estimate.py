@@ -29,9 +29,9 @@ from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
-from ...errors import InputError
 from ...geometry.rotations import rotate
 from ...target.motion import rotation_matrices
+from ..errors import FramesUnusableError, NoSurfacesError
 from ..frames import Frames
 from ..initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
 from ..options import FramesOptions
@@ -52,15 +52,6 @@ SURFEL_FRACTION = 1 / 100
 POOR_SCALE = 3.0
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
-
-
-class FramesUnusableError(InputError):
-    code = "frames_unusable"
-
-
-class NoSurfacesError(FramesUnusableError):
-    """No planar patch matched across frames: a property of the data, not of the start, so
-    no other start is tried."""
 
 
 @dataclass(frozen=True)

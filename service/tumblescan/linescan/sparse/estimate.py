@@ -23,6 +23,7 @@ from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
 from ...geometry.rotations import angles_from_axis, axis_from_angles
+from ..errors import NotInitializableError
 from ..initializer import InitializerError, cone_initial
 from ..options import TracksOptions
 from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validation_fields
@@ -164,7 +165,11 @@ def _start(tracks: Tracks, run: _Run, path: str, warnings: list[str]) -> tuple[F
             return guess.x, guess.x_spin_only, "initializer+lm"
         except InitializerError as exc:
             if not run.allow_fallback:
-                raise
+                raise NotInitializableError(
+                    f"strategy 'lm' needs the closed-form start, which these tracks do not support ({exc}); "
+                    "use strategy 'auto' or 'swarm'",
+                    field="strategy",
+                ) from None
             warnings.append(f"closed-form initializer unavailable ({exc}); used the swarm")
     cfg = run.opts.swarm
     found = swarm_search(

@@ -19,19 +19,21 @@ from tumblescan import (
     write_tracks,
 )
 from tumblescan.errors import (
-    DuplicateObservationError,
     MalformedInputError,
     MissingTimeError,
     NonFiniteValueError,
-    SingleObservationTrackError,
     TimeOrderError,
+    UnknownFieldError,
+)
+from tumblescan.linescan.errors import (
+    DuplicateObservationError,
+    SingleObservationTrackError,
     TooFewFramesError,
     TooFewTracksError,
-    UnknownFieldError,
 )
 from tumblescan.linescan.tracks import infer_frames
 
-from .conftest import tracks_for
+from ..conftest import tracks_for
 
 
 @pytest.mark.parametrize("suffix", [".json", ".csv"])

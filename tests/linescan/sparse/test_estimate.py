@@ -9,7 +9,7 @@ from tumblescan import EstimateOptions, Motion, Scene, SwarmConfig, Tracks, esti
 from tumblescan.errors import InvalidOptionError
 from tumblescan.linescan.truth import errors_against
 
-from .conftest import motion_for, tracks_for
+from ...conftest import motion_for, tracks_for
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

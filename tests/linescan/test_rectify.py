@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from tumblescan import Scanner, Scene, distort, estimate_motion, rectify, simulate_frames, simulate_tracks
 from tumblescan.errors import NonFiniteValueError
 
-from .conftest import motion_for
+from ..conftest import motion_for
 
 
 @settings(max_examples=30, deadline=None)

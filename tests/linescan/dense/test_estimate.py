@@ -35,7 +35,7 @@ from tumblescan import (
 from tumblescan.errors import InputError
 from tumblescan.linescan.dense.surfels import prepare
 
-from .live import serve
+from ...live import serve
 
 SEED = 1
 SCANNER = Scanner(lines=128, pixels=128)

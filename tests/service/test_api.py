@@ -26,8 +26,8 @@ from tumblescan import (
 from tumblescan.linescan.tracks_io import write_tracks
 from tumblescan.linescan.truth import errors_against
 
-from .conftest import tracks_for
-from .live import serve, wait_job
+from ..conftest import tracks_for
+from ..live import serve, wait_job
 
 FINAL = ("succeeded", "failed", "cancelled")
 

@@ -13,8 +13,8 @@ import pytest
 
 from tumblescan import tracks_to_json
 
-from .conftest import tracks_for
-from .live import free_port, serve, spawn, stop, wait_job, wait_ready
+from ..conftest import tracks_for
+from ..live import free_port, serve, spawn, stop, wait_job, wait_ready
 
 pytestmark = pytest.mark.slow
 

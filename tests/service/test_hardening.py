@@ -16,8 +16,8 @@ import pytest
 
 from tumblescan import TimedCloud, tracks_to_json, write_ply
 
-from .conftest import tracks_for
-from .live import free_port, serve, wait_job
+from ..conftest import tracks_for
+from ..live import free_port, serve, wait_job
 
 USER, OTHER, ADMIN = "user-key", "other-key", "admin-key"
 LIMITS = {

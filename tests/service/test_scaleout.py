@@ -12,9 +12,9 @@ from tumblescan import tracks_to_json
 from tumblescan.jobs.store import JobStore
 from tumblescan_client import Client
 
-from .conftest import tracks_for
-from .infra import ensure_redis, postgres_database, scaleout_env
-from .live import serve, spawn, stop, wait_ready
+from ..conftest import tracks_for
+from ..infra import ensure_redis, postgres_database, scaleout_env
+from ..live import serve, spawn, stop, wait_ready
 
 pytestmark = pytest.mark.slow
 

@@ -5,7 +5,7 @@ import numpy as np
 from tumblescan import Scanner, Scene, simulate_frames, simulate_tracks
 from tumblescan.linescan.sensor import azimuth_elevation
 
-from .conftest import motion_for
+from ..conftest import motion_for
 
 
 def test_tracks_are_corners_seen_at_their_scan_line_time() -> None:

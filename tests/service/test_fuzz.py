@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from .live import serve
+from ..live import serve
 
 pytestmark = pytest.mark.slow
 CHECKS = "not_a_server_error,response_schema_conformance,status_code_conformance,content_type_conformance"

@@ -14,9 +14,9 @@ import pytest
 
 from tumblescan import tracks_to_json
 
-from .conftest import tracks_for
-from .infra import ensure_redis, pg_up, postgres_database, scaleout_env
-from .live import serve, spawn, stop, wait_job, wait_ready
+from ..conftest import tracks_for
+from ..infra import ensure_redis, pg_up, postgres_database, scaleout_env
+from ..live import serve, spawn, stop, wait_job, wait_ready
 
 pytestmark = pytest.mark.slow
 

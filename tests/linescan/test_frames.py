@@ -8,16 +8,11 @@ import numpy as np
 import pytest
 
 from tumblescan import FrameCloud, Scanner, Scene, TimedCloud, simulate_frames
-from tumblescan.errors import (
-    LimitExceededError,
-    MalformedInputError,
-    NonFiniteValueError,
-    TimeOrderError,
-    TooFewFramesError,
-)
+from tumblescan.errors import LimitExceededError, MalformedInputError, NonFiniteValueError, TimeOrderError
+from tumblescan.linescan.errors import TooFewFramesError
 from tumblescan.linescan.frames import assemble_frames, read_range_images
 
-from .conftest import motion_for
+from ..conftest import motion_for
 
 SCANNER = Scanner(lines=48, pixels=40)
 

@@ -10,8 +10,8 @@ import pytest
 from tumblescan import tracks_to_json
 from tumblescan_client import AuthenticationError, Client, NotFoundError
 
-from .conftest import tracks_for
-from .live import serve
+from ..conftest import tracks_for
+from ..live import serve
 
 
 @pytest.fixture(scope="module")

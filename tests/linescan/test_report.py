@@ -18,11 +18,11 @@ from tumblescan import Scanner, Scene, TimedCloud, simulate_frames, simulate_tra
 from tumblescan.linescan.tracks_io import write_tracks
 from tumblescan.linescan.truth import motion_to_json
 
-from .browser import browser_page
-from .conftest import motion_for
-from .live import serve
+from ..browser import browser_page
+from ..conftest import motion_for
+from ..live import serve
 
-ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
 
 @pytest.fixture(scope="module")

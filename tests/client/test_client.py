@@ -30,8 +30,8 @@ from tumblescan_client import (
     UnprocessableEntityError,
 )
 
-from .conftest import tracks_for
-from .live import free_port, serve
+from ..conftest import tracks_for
+from ..live import free_port, serve
 
 SLOW = {"strategy": "swarm", "swarm": {"particles": 3000, "iterations": 5000}}
 

@@ -12,8 +12,8 @@ import pytest
 from tumblescan import tracks_to_json
 from tumblescan.jobs.store import JobStore
 
-from .conftest import tracks_for
-from .live import serve, wait_job
+from ..conftest import tracks_for
+from ..live import serve, wait_job
 
 pytestmark = pytest.mark.slow
 FINAL = ("succeeded", "failed", "cancelled")

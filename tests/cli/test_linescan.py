@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -88,3 +89,61 @@ def test_missing_file_and_bad_motion_file_exit_2(tmp_path: Path, sim: Path) -> N
         "rectify", str(sim / "frames.ply"), "--motion", str(tmp_path / "m.json"), "--out", str(tmp_path / "o.ply")
     )
     assert proc.returncode == 2 and "not a motion result" in proc.stderr
+
+
+def test_the_kind_group_and_the_top_level_alias_agree(sim: Path) -> None:
+    grouped = run("linescan-motion", "estimate", str(sim / "tracks.json"), "--json", "--seed", "2")
+    alias = run("estimate", str(sim / "tracks.json"), "--json", "--seed", "2")
+    assert grouped.returncode == alias.returncode == 0, grouped.stderr + alias.stderr
+    a, b = MotionResult.model_validate_json(grouped.stdout), MotionResult.model_validate_json(alias.stdout)
+    assert a.spin.rate_deg_s == b.spin.rate_deg_s and a.precession.center_m == b.precession.center_m
+
+
+def test_a_tracks_option_with_frames_exits_2_naming_it(sim: Path) -> None:
+    proc = run("linescan-motion", "estimate", str(sim / "frames.ply"), "--strategy", "lm")
+    assert proc.returncode == 2 and proc.stderr == "error: --strategy applies to tracks input, not to frames\n"
+
+
+def test_a_file_named_ply_that_is_not_one_says_so(tmp_path: Path) -> None:
+    path = tmp_path / "scan.ply"
+    path.write_bytes(bytes(range(256)) * 4)
+    proc = run("estimate", str(path))
+    assert proc.returncode == 2
+    assert proc.stderr == "error: scan.ply is named .ply but is not a PLY file (its first bytes say otherwise)\n"
+
+
+def test_strategy_lm_on_tracks_the_initializer_cannot_use_exits_2(sim: Path, tmp_path: Path) -> None:
+    # Two corners seen in every frame, a third only in frames 0-2: two frame pairs share 3.
+    doc = json.loads((sim / "tracks.json").read_text())
+    counts = Counter(o["track"] for o in doc["observations"])
+    ids = [t for t, _ in counts.most_common(3)]
+    keep = [o for o in doc["observations"] if o["track"] in ids[:2] or (o["track"] == ids[2] and o["frame"] < 3)]
+    (tmp_path / "sparse.json").write_text(json.dumps({**doc, "observations": keep}))
+    proc = run("estimate", str(tmp_path / "sparse.json"), "--strategy", "lm")
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "strategy 'lm' needs the closed-form start" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_kinds_lists_the_kinds_and_their_forms() -> None:
+    proc = run("kinds")
+    assert proc.returncode == 0 and proc.stdout.startswith("linescan-motion: ")
+    listing = json.loads(run("kinds", "--json").stdout)
+    forms = {f["name"]: f for f in listing[0]["forms"]}
+    assert listing[0]["name"] == "linescan-motion" and forms["frames"]["parts"] == ["file", "truth"]
+
+
+def test_json_output_keeps_library_chatter_off_stdout() -> None:
+    # What C code and Python print while --json work runs goes to stderr; stdout is the JSON alone.
+    code = (
+        "import ctypes, json, os, sys\n"
+        "from tumblescan.cli.common import json_stdout\n"
+        "with json_stdout(True):\n"
+        "    os.write(1, b'[Open3D WARNING] Too few correspondences\\n')\n"
+        "    ctypes.CDLL(None).puts(b'chatter from C')\n"
+        "    print('chatter from Python')\n"
+        "sys.stdout.write(json.dumps({'ok': True}) + '\\n')\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == {"ok": True}
+    assert "Too few correspondences" in proc.stderr and "chatter from C" in proc.stderr
