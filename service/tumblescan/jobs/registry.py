@@ -18,9 +18,11 @@ class UnknownKindError(InputError):
 def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
     from .kinds.linescan import LinescanMotion
+    from .kinds.panel_axis import PanelAxis
 
     listed: list[JobKind] = [
         LinescanMotion(),
+        PanelAxis(),
     ]
     return {k.name: k for k in listed}
 

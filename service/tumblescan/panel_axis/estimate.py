@@ -38,14 +38,21 @@ ELONGATION_ALIGN_DEG = 20.0
 
 
 def estimate_axis(
-    gray: FloatArray, meta: PanelAxisInput, options: EstimateOptions | None = None, progress: Progress = no_progress
+    gray: FloatArray,
+    meta: PanelAxisInput,
+    options: EstimateOptions | None = None,
+    progress: Progress = no_progress,
+    *,
+    full_scale: float | None = None,
 ) -> PanelAxisResult:
-    """Estimate the panel axis from a grayscale image (DN, float (H, W)) and its validated meta.json."""
+    """Estimate the panel axis from a grayscale image (DN, float (H, W)) and its validated meta.json;
+    ``full_scale`` is the image's saturation level (default: 255, or 65535 when a pixel is over 255)."""
     options = options or EstimateOptions()
     t0 = time.perf_counter()
     camera = meta.pinhole
     frames = _Frames(meta)
-    full_scale = 255.0 if gray.max() <= 255 else 65535.0
+    if full_scale is None:
+        full_scale = 255.0 if gray.max() <= 255 else 65535.0
     if options.method == "paper":
         return _paper_result(gray, camera, frames, options, t0)
     rng = np.random.default_rng(options.seed)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 RESULT_SCHEMA = "tumblescan.panel_axis.result/1"
 
@@ -78,9 +78,11 @@ class Segmentation(_Model):
 
 
 class PanelAxisResult(_Model):
-    model_config = ConfigDict(extra="forbid")
+    """The whole result (``result.json``)."""
 
-    schema_: str = RESULT_SCHEMA
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    schema_: str = Field(RESULT_SCHEMA, alias="schema")
     status: Literal["succeeded"] = "succeeded"
     method: Literal["ours", "paper"] = "ours"
     axis: Axis | None
@@ -96,6 +98,5 @@ class PanelAxisResult(_Model):
     timings_ms: dict[str, float] = {}
 
     def to_json(self) -> dict[str, object]:
-        data = self.model_dump(mode="json")
-        data["schema"] = data.pop("schema_")
-        return {"schema": data.pop("schema"), **data}
+        """The JSON document, ``schema`` first."""
+        return self.model_dump(mode="json", by_alias=True)
