@@ -20,7 +20,9 @@ app = typer.Typer(
 def simulate(
     out: Annotated[Path, typer.Option(help="output directory")] = Path("panel-sim"),
     seed: Annotated[int, typer.Option(min=0)] = 0,
-    regime: Annotated[Literal["near", "ground"], typer.Option(help="near range, or a ground telescope (weak perspective)")] = "near",
+    regime: Annotated[
+        Literal["near", "ground"], typer.Option(help="near range, or a ground telescope (weak perspective)")
+    ] = "near",
     noise: Annotated[bool, typer.Option(help="shot and read noise")] = True,
     case: Annotated[
         Literal["normal", "edge-on", "end-on", "blank", "broken-meta"], typer.Option(help="the view to make")

@@ -43,7 +43,12 @@ class EdgePoints:
 
 
 def edge_points(
-    image: FloatArray, segment: FloatArray, *, half_width_px: float = 3.0, step_px: float = 1.0, end_trim_px: float = 3.0
+    image: FloatArray,
+    segment: FloatArray,
+    *,
+    half_width_px: float = 3.0,
+    step_px: float = 1.0,
+    end_trim_px: float = 3.0,
 ) -> EdgePoints:
     """Sample intensity profiles normal to ``segment`` every ``step_px`` (bilinear, ``cv2.remap``) and
     locate the edge in each as the centroid of the gradient of the dominant polarity within ±1.5 px
@@ -127,7 +132,7 @@ def fit_line(uv_px: FloatArray, *, iterations: int = 4) -> EdgeLine | None:
         c = (w[:, None] * p).sum(axis=0) / w.sum()
         q = p - c
         cov = (w[:, None] * q).T @ q
-        evals, evecs = np.linalg.eigh(cov)
+        _, evecs = np.linalg.eigh(cov)
         normal = evecs[:, 0]
         r = q @ normal
         scale = max(1.4826 * float(np.median(np.abs(r))), MIN_POINT_SIGMA_PX)
@@ -138,7 +143,7 @@ def fit_line(uv_px: FloatArray, *, iterations: int = 4) -> EdgeLine | None:
     keep = w > 0
     c = (w[:, None] * p).sum(axis=0) / w.sum()
     q = p - c
-    evals, evecs = np.linalg.eigh((w[:, None] * q).T @ q)
+    _, evecs = np.linalg.eigh((w[:, None] * q).T @ q)
     normal = evecs[:, 0]
     direction = np.array([-normal[1], normal[0]])
     r = (q @ normal)[keep]

@@ -127,7 +127,9 @@ def _pixel_box(camera: PinholeCamera, t_cam_m: FloatArray, radius_m: float) -> t
     or straddles the camera."""
     if t_cam_m[2] - radius_m <= 0:
         return None
-    corners = t_cam_m + radius_m * np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], float) * 2 - radius_m
+    corners = (
+        t_cam_m + radius_m * np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], float) * 2 - radius_m
+    )
     uv = camera.project(corners)
     u0 = max(int(np.floor(uv[:, 0].min())) - 2, 0)
     v0 = max(int(np.floor(uv[:, 1].min())) - 2, 0)

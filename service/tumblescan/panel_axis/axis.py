@@ -39,7 +39,9 @@ class PlaneObs:
         return float((self.dn_doffset @ d) ** 2 * self.var_offset_px2 + (self.dn_dangle @ d) ** 2 * self.var_angle_rad2)
 
 
-def plane_obs(camera: PinholeCamera, centroid_px: FloatArray, angle_rad: float, var_offset: float, var_angle: float) -> PlaneObs:
+def plane_obs(
+    camera: PinholeCamera, centroid_px: FloatArray, angle_rad: float, var_offset: float, var_angle: float
+) -> PlaneObs:
     """The plane of the ideal image line through ``centroid_px`` at ``angle_rad`` (direction
     ``(cos, sin)``), with derivatives by central differences."""
 
@@ -147,7 +149,9 @@ def angle_between_lines_deg(a: FloatArray, b: FloatArray) -> float:
     return float(np.degrees(np.arccos(min(1.0, c))))
 
 
-def fit_with_orthogonal(axis: DirectionFit, axis_planes: list[PlaneObs], others: list[tuple[DirectionFit, list[PlaneObs]]]) -> DirectionFit:
+def fit_with_orthogonal(
+    axis: DirectionFit, axis_planes: list[PlaneObs], others: list[tuple[DirectionFit, list[PlaneObs]]]
+) -> DirectionFit:
     """Refit the axis together with families known to be orthogonal to it (the wing ends, the bus
     edges across it): minimise ``Σ_i w_i (n_i·d)²/σ_i² + Σ_j Σ_k w_k (n_k·d_j)²/σ_k²`` subject to
     ``d_j ⟂ d`` (``scipy.optimize.least_squares``), with ``d_j = cos ψ_j·e1(d) + sin ψ_j·e2(d)``.

@@ -212,7 +212,9 @@ def _axis_family(families: list[Family], target: Target, min_line_px: float) -> 
         if len(fam.edges) < 2 or max(e.length_px for e in fam.edges) < min_line_px:
             continue
         score = sum(
-            e.length_px for e in fam.edges if abs(e.line.direction @ target.direction) > np.cos(np.radians(ELONGATION_ALIGN_DEG))
+            e.length_px
+            for e in fam.edges
+            if abs(e.line.direction @ target.direction) > np.cos(np.radians(ELONGATION_ALIGN_DEG))
         )
         if score > best_score:
             best, best_score = fam, score

@@ -109,11 +109,12 @@ class PanelAxisInput(BaseModel):
 def parse_meta(data: bytes | str, field: str = "meta") -> PanelAxisInput:
     """Validate meta.json text; ``InputError`` naming the field otherwise."""
     try:
-        raw = json.loads(data, parse_constant=_reject_constant)
-    except _NonFinite as exc:
-        raise InputError(f"{field}: {exc.args[0]} is not a finite number (JSON has no NaN/Infinity)", field=field) from None
+        raw = json.loads(data)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
+    bad = _non_finite(raw)
+    if bad is not None:
+        raise InputError(f"{bad}: not a finite number (NaN and Infinity are refused)", field=bad)
     if not isinstance(raw, dict):
         raise InputError(f"{field}: a JSON object is expected", field=field)
     schema = raw.get("schema")
@@ -139,12 +140,16 @@ def read_meta(path: Path) -> PanelAxisInput:
     return parse_meta(path.read_bytes())
 
 
-class _NonFinite(Exception):
-    pass
-
-
-def _reject_constant(name: str) -> Any:
-    raise _NonFinite(name)
+def _non_finite(value: Any, path: str = "") -> str | None:
+    """The dotted path of the first NaN/Infinity in a parsed JSON value, or None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return path or "meta"
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, sub in items:
+        found = _non_finite(sub, f"{path}.{key}" if path else str(key))
+        if found is not None:
+            return found
+    return None
 
 
 def _pointing(p: dict[str, Any]) -> AnglePointing | MatrixPointing:
@@ -162,9 +167,13 @@ def _check(meta: PanelAxisInput) -> None:
     if c.width_px * c.height_px > MAX_PIXELS:
         raise InputError(f"camera: {c.width_px}x{c.height_px} px is over the 64 Mpx limit", field="camera.width_px")
     if not -0.5 <= c.cx_px <= c.width_px - 0.5:
-        raise InputError(f"camera.cx_px: {c.cx_px} is outside the image [-0.5, {c.width_px - 0.5}]", field="camera.cx_px")
+        raise InputError(
+            f"camera.cx_px: {c.cx_px} is outside the image [-0.5, {c.width_px - 0.5}]", field="camera.cx_px"
+        )
     if not -0.5 <= c.cy_px <= c.height_px - 0.5:
-        raise InputError(f"camera.cy_px: {c.cy_px} is outside the image [-0.5, {c.height_px - 0.5}]", field="camera.cy_px")
+        raise InputError(
+            f"camera.cy_px: {c.cy_px} is outside the image [-0.5, {c.height_px - 0.5}]", field="camera.cy_px"
+        )
     if c.distortion is not None and len(c.distortion) != 5:
         raise InputError(
             f"camera.distortion: {len(c.distortion)} coefficients (OpenCV [k1, k2, p1, p2, k3] expected)",

@@ -17,6 +17,7 @@ class EstimateOptions(BaseModel):
     min_line_px: float = Field(30.0, ge=10, description="shortest long edge")
     weak_snr: float = Field(20.0, gt=0, description="perspective SNR under which the view is weak perspective")
     require_axis: bool = Field(
-        False, description="refuse (depth_unobservable) instead of the in-image angle when weak perspective has no prior"
+        False,
+        description="refuse (depth_unobservable) instead of the in-image angle when weak perspective has no prior",
     )
     seed: int = Field(0, ge=0, description="seeds RANSAC and the weak-perspective Monte Carlo")

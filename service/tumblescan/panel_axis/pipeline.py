@@ -38,7 +38,9 @@ def load_input(meta_path: Path, image_path: Path | None = None) -> PanelAxisData
     return PanelAxisData(meta, gray, full_scale, path)
 
 
-def run(data: PanelAxisData, options: EstimateOptions | None = None, progress: Progress = no_progress) -> PanelAxisResult:
+def run(
+    data: PanelAxisData, options: EstimateOptions | None = None, progress: Progress = no_progress
+) -> PanelAxisResult:
     """Estimate the panel axis of a loaded input."""
     return estimate_axis(data.gray, data.meta, options, progress, full_scale=data.full_scale)
 

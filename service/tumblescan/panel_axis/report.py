@@ -53,7 +53,13 @@ def overlay_png(gray: FloatArray, meta: PanelAxisInput, result: dict[str, Any]) 
 
 
 def _draw_direction(
-    img: np.ndarray, cam: PinholeCamera, c: FloatArray, d_cam: FloatArray, half: float, colour: tuple[int, int, int], width: int
+    img: np.ndarray,
+    cam: PinholeCamera,
+    c: FloatArray,
+    d_cam: FloatArray,
+    half: float,
+    colour: tuple[int, int, int],
+    width: int,
 ) -> None:
     """The image of the 3D line of direction ``d_cam`` through the point seen at ``c``: it runs from
     ``c`` toward the vanishing point ``K·d``."""
@@ -69,10 +75,12 @@ def _draw_direction(
 
 
 def _pt(x: float, y: float) -> tuple[int, int]:
-    return int(round(x)), int(round(y))
+    return round(x), round(y)
 
 
-def build_report(gray: FloatArray, meta: PanelAxisInput, result: dict[str, Any], truth: dict[str, Any] | None = None) -> str:
+def build_report(
+    gray: FloatArray, meta: PanelAxisInput, result: dict[str, Any], truth: dict[str, Any] | None = None
+) -> str:
     """The whole page."""
     sections = [
         image_html(
@@ -86,34 +94,60 @@ def build_report(gray: FloatArray, meta: PanelAxisInput, result: dict[str, Any],
     rows: list[list[str]] = [
         ["method", result.get("method", "ours"), ""],
         ["regime", obs["regime"], f"perspective SNR {_f(obs.get('perspective_snr'), 3)}"],
-        ["ambiguous", str(result["ambiguous"]), "mirror pair about the plane ⟂ the line of sight" if result["ambiguous"] else ""],
-        ["in-image angle (deg)", _f(result["image_angle_deg"]), f"σ {_f(result.get('sigma_image_angle_deg'))}"],
+        [
+            "ambiguous",
+            str(result["ambiguous"]),
+            "mirror pair about the plane ⟂ the line of sight" if result["ambiguous"] else "",
+        ],
+        ["in-image angle (deg)", _f(result["image_angle_deg"]), f"sigma {_f(result.get('sigma_image_angle_deg'))}"],
     ]
     if axis is not None:
         rows += [
-            ["axis, camera", _v(axis["camera"]), f"σ {_f(axis.get('sigma_deg'))} deg"],
+            ["axis, camera", _v(axis["camera"]), f"sigma {_f(axis.get('sigma_deg'))} deg"],
             ["axis, station ENU", _v(axis.get("station_enu")), ""],
             ["axis, ECEF", _v(axis.get("ecef")), ""],
-            ["pitch (deg)", _f(axis.get("pitch_deg")), f"σ {_f(axis.get('sigma_pitch_deg'))}"],
-            ["yaw (deg)", _f(axis.get("yaw_deg")), f"σ {_f(axis.get('sigma_yaw_deg'))}"],
+            ["pitch (deg)", _f(axis.get("pitch_deg")), f"sigma {_f(axis.get('sigma_pitch_deg'))}"],
+            ["yaw (deg)", _f(axis.get("yaw_deg")), f"sigma {_f(axis.get('sigma_yaw_deg'))}"],
             ["pitch, yaw ECEF (deg)", f"{_f(axis.get('pitch_ecef_deg'))}, {_f(axis.get('yaw_ecef_deg'))}", ""],
         ]
     else:
         rows.append(["axis", "not observable", "weak perspective without a panel-size prior: in-image angle only"])
     if obs.get("tilt_deg") is not None:
-        rows.append(["tilt out of the image plane (deg)", _f(obs["tilt_deg"]), f"σ {_f(obs.get('sigma_tilt_deg'))}"])
+        rows.append(
+            ["tilt out of the image plane (deg)", _f(obs["tilt_deg"]), f"sigma {_f(obs.get('sigma_tilt_deg'))}"]
+        )
     panel = result["panel"]
     rows += [
-        ["orthogonality (deg)", _f(panel.get("orthogonality_deg")), "|90° − angle(axis, short axis)| (paper's Table 2)"],
-        ["edges along / across", f"{panel.get('long_edges', 0)} / {panel.get('short_edges', 0)}", f"edge rms {_f(panel.get('edge_rms_px'), 3)} px"],
+        [
+            "orthogonality (deg)",
+            _f(panel.get("orthogonality_deg")),
+            "|90° - angle(axis, short axis)| (paper's Table 2)",
+        ],
+        [
+            "edges along / across",
+            f"{panel.get('long_edges', 0)} / {panel.get('short_edges', 0)}",
+            f"edge rms {_f(panel.get('edge_rms_px'), 3)} px",
+        ],
         ["warnings", ", ".join(result.get("warnings", [])) or "none", ""],
     ]
     for c in result.get("candidates", []):
-        rows.append([f"candidate ({c['kind']})", _v(c.get("station_enu") or c["camera"]), f"cost {_f(c['cost'], 3)} px, σ {_f(c.get('sigma_deg'))} deg"])
+        rows.append(
+            [
+                f"candidate ({c['kind']})",
+                _v(c.get("station_enu") or c["camera"]),
+                f"cost {_f(c['cost'], 3)} px, sigma {_f(c.get('sigma_deg'))} deg",
+            ]
+        )
     if truth is not None and axis is not None:
         t = np.array(truth["axis_camera"])
         err = float(np.degrees(np.arccos(min(1.0, abs(float(np.dot(t, axis["camera"])))))))
-        rows.append(["error against the simulation's truth (deg)", _f(err), f"bound σ_CRLB {_f(truth.get('sigma_crlb_deg'))}"])
+        rows.append(
+            [
+                "error against the simulation's truth (deg)",
+                _f(err),
+                f"bound sigma_CRLB {_f(truth.get('sigma_crlb_deg'))}",
+            ]
+        )
     sections.append(table_html(["quantity", "value", "note"], rows))
     return page("Panel axis from one image", sections, with_plotly=False)
 

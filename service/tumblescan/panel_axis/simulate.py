@@ -160,7 +160,7 @@ def _attitude(
     n_vis = n_cam if n_cam @ los < 0 else -n_cam  # the face toward the camera
     for _ in range(100):
         sun = _unit(rng.normal(size=3))
-        if n_vis @ sun >= MIN_SUN_COS or case == "edge-on" and sun @ -los > 0.3:
+        if n_vis @ sun >= MIN_SUN_COS or (case == "edge-on" and sun @ -los > 0.3):
             return R, sun
     return None, None
 

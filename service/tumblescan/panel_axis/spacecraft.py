@@ -48,8 +48,11 @@ class Spacecraft(BaseModel):
         return self.bus_m[1] / 2 + self.yoke_m
 
     def mesh(self) -> Mesh:
-        bx, by, bz = self.bus_m
-        parts = [box((0, 0, 0), self.bus_m, BUS_ALBEDO), box((0, 0, bz / 2 + self.payload_m[2] / 2), self.payload_m, PAYLOAD_ALBEDO)]
+        _, by, bz = self.bus_m
+        parts = [
+            box((0, 0, 0), self.bus_m, BUS_ALBEDO),
+            box((0, 0, bz / 2 + self.payload_m[2] / 2), self.payload_m, PAYLOAD_ALBEDO),
+        ]
         n = self.sub_panels
         sub = (self.panel_length_m - (n - 1) * self.gap_m) / n
         for side in (1.0, -1.0):

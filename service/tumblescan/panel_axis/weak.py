@@ -102,7 +102,9 @@ def ippe_candidates(
     return sorted(out, key=lambda c: c.cost_px)
 
 
-def _solve(corners: FloatArray, L: float, W: float, camera: PinholeCamera) -> list[tuple[FloatArray, FloatArray, float]]:
+def _solve(
+    corners: FloatArray, L: float, W: float, camera: PinholeCamera
+) -> list[tuple[FloatArray, FloatArray, float]]:
     import cv2
 
     obj = np.array([[0, 0, 0], [L, 0, 0], [L, W, 0], [0, W, 0]], dtype=np.float64)

@@ -67,7 +67,9 @@ class PanelAxis:
             raise LimitExceededError(f"image: {image.stat().st_size} bytes is over the limit", field="image")
         data = load_input(sub.files["meta"][0], image)  # every invalid_input is a 422 now
         if data.gray.size > limits.max_pixels:
-            raise LimitExceededError(f"image: {data.gray.size} px is over the {limits.max_pixels} px limit", field="image")
+            raise LimitExceededError(
+                f"image: {data.gray.size} px is over the {limits.max_pixels} px limit", field="image"
+            )
         return {"meta": _relative(sub.files["meta"][0], sub), "image": _relative(image, sub)}
 
     def run(self, ctx: JobContext) -> JobOutput:

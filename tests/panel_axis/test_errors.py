@@ -1,0 +1,142 @@
+"""Every refusal in the digest's list, with its code and the field it names."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tumblescan.errors import InputError
+from tumblescan.imaging.image_io import write_image
+from tumblescan.panel_axis.meta import parse_meta
+from tumblescan.panel_axis.pipeline import load_input, run
+from tumblescan.panel_axis.simulate import BROKEN_META, simulate_view, write_view
+
+from .conftest import SIZE
+
+
+def _refusal(meta: Path) -> InputError:
+    with pytest.raises(InputError) as exc:
+        run(load_input(meta))
+    return exc.value
+
+
+# The width is checked against the image (below); every other broken field is caught in meta.json.
+META_ONLY = [k for k, (field, _) in enumerate(BROKEN_META) if field != "camera.width_px"]
+
+
+@pytest.mark.parametrize("seed", META_ONLY)
+def test_each_broken_meta_is_invalid_input_naming_its_field(seed: int) -> None:
+    meta = _broken(seed)
+    field = BROKEN_META[seed][0]
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta, allow_nan=True))
+    assert exc.value.code == "invalid_input"
+    assert exc.value.field == field, str(exc.value)
+    assert field.split(".")[-1] in str(exc.value)
+
+
+def test_the_simulator_writes_broken_meta_with_the_expected_error(tmp_path: Path) -> None:
+    write_view(tmp_path, simulate_view(1, case="broken-meta", **SIZE))
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    with pytest.raises(InputError) as exc:
+        load_input(tmp_path / "meta.json")
+    assert exc.value.code == truth["expected_error"]["code"] and exc.value.field == truth["expected_error"]["field"]
+
+
+def _broken(seed: int) -> dict[str, object]:
+    """A broken meta without rendering (the simulator's breaker on a valid meta)."""
+    from tumblescan.panel_axis import simulate as sim
+
+    meta = json.loads(json.dumps(_valid_meta()))
+    sim._break(meta, BROKEN_META[seed][0], np.eye(3))
+    return meta  # type: ignore[no-any-return]
+
+
+def _valid_meta() -> dict[str, object]:
+    return {
+        "schema": "tumblescan.panel_axis.input/1",
+        "image": "image.png",
+        "camera": {"model": "pinhole", "width_px": 640, "height_px": 480, "fx_px": 1500.0, "fy_px": 1500.0,
+                   "cx_px": 319.5, "cy_px": 239.5, "skew": 0.0, "distortion": None},
+        "pointing": {"frame": "station_enu", "azimuth_deg": 288.0, "elevation_deg": 52.0, "roll_deg": 0.0},
+        "station": {"lat_deg": 34.27, "lon_deg": 108.95, "height_m": 400.0},
+        "prior": {"range_m": 70.0, "panel_length_m": 5.5, "panel_width_m": 2.0, "wings": 2},
+    }  # fmt: skip
+
+
+def test_a_width_that_is_not_the_images_is_refused(tmp_path: Path) -> None:
+    meta = _valid_meta()
+    meta["camera"]["width_px"] = 642  # type: ignore[index]
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    write_image(tmp_path / "image.png", np.zeros((480, 640), np.uint8))
+    err = _refusal(tmp_path / "meta.json")
+    assert err.code == "invalid_input" and err.field == "camera.width_px" and "640x480" in str(err)
+
+
+@pytest.mark.parametrize(
+    ("image", "message"),
+    [
+        (np.zeros((480, 640, 4), np.uint8), "4 channels"),
+        (np.zeros((480, 640), np.float32), "float32"),
+        (np.zeros((60, 640), np.uint8), "64"),
+    ],
+)
+def test_refused_images(tmp_path: Path, image: np.ndarray, message: str) -> None:
+    meta = _valid_meta()
+    h, w = image.shape[:2]
+    meta["camera"].update(width_px=w, height_px=h, cx_px=(w - 1) / 2, cy_px=(h - 1) / 2)  # type: ignore[attr-defined]
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "image.tif", image)
+    meta["image"] = "image.tif"
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError) as exc:
+        load_input(tmp_path / "meta.json")
+    assert exc.value.code == "invalid_input" and message in str(exc.value)
+
+
+def test_nan_and_unknown_fields_are_refused_by_name() -> None:
+    text = json.dumps(_valid_meta()).replace('"fx_px": 1500.0', '"fx_px": NaN')
+    with pytest.raises(InputError, match=r"camera\.fx_px: not a finite number"):
+        parse_meta(text)
+    meta = _valid_meta()
+    meta["prior"]["mass_kg"] = 3.0  # type: ignore[index]
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta))
+    assert exc.value.field == "prior.mass_kg"
+
+
+def test_an_unreadable_image(tmp_path: Path) -> None:
+    (tmp_path / "meta.json").write_text(json.dumps(_valid_meta()))
+    (tmp_path / "image.png").write_bytes(b"GIF89a not a png")
+    err = _refusal(tmp_path / "meta.json")
+    assert err.code == "unreadable_image" and err.field == "image"
+
+
+def test_a_blank_sky_has_no_target(tmp_path: Path) -> None:
+    write_view(tmp_path, simulate_view(1, case="blank", **SIZE))
+    err = _refusal(tmp_path / "meta.json")
+    assert err.code == "no_target" and err.field == "image"
+
+
+def test_a_scalloped_blob_has_too_few_edges(tmp_path: Path) -> None:
+    import cv2
+
+    img = np.full((480, 640), 6, np.uint8)
+    for k in range(12):  # a chain of discs: elongated, with no straight edge of 30 px
+        cv2.circle(img, (200 + 20 * k, 240 + 8 * k), 14, 120, -1, cv2.LINE_AA)
+    write_image(tmp_path / "image.png", img)
+    (tmp_path / "meta.json").write_text(json.dumps(_valid_meta()))
+    err = _refusal(tmp_path / "meta.json")
+    assert err.code == "too_few_edges"
+
+
+@pytest.mark.parametrize(("case", "seed"), [("edge-on", 0), ("edge-on", 1), ("end-on", 0), ("end-on", 2)])
+def test_edge_on_and_end_on_views_are_degenerate(tmp_path: Path, case: str, seed: int) -> None:
+    write_view(tmp_path, simulate_view(seed, case=case, **SIZE))  # type: ignore[arg-type]
+    err = _refusal(tmp_path / "meta.json")
+    assert err.code == "degenerate_view" and err.field == "image"
