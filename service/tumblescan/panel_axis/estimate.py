@@ -261,11 +261,13 @@ def _orthogonal_families(
 
 
 def _perspective_snr(family: Family, a_img: FloatArray, camera: PinholeCamera) -> float:
-    """(largest separation of the family's lines / f) / their median angle σ."""
+    """(largest separation of the family's lines / f) / the angle σ of its two best-measured lines
+    (those carry the depth information; short or ragged members would only dilute it)."""
     b = np.array([-a_img[1], a_img[0]])
     offsets = np.array([b @ e.line.centroid_px for e in family.edges])
     sep = float(np.ptp(offsets))
-    sig = float(np.median([np.sqrt(e.line.var_angle_rad2) for e in family.edges]))
+    var = np.sort([e.line.var_angle_rad2 for e in family.edges])[:2]
+    sig = float(np.sqrt(var.mean()))
     return (sep / camera.focal_px) / max(sig, 1e-12)
 
 

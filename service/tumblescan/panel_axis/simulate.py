@@ -70,25 +70,44 @@ def simulate_view(
     image_name: str = "image.png",
 ) -> SimulatedView:
     """Render one seeded view (see the module docstring)."""
+    return simulate_views(
+        seed, regime, noises=(noise,), case=case, width_px=width_px, height_px=height_px, bits=bits, image_name=image_name
+    )[0]
+
+
+def simulate_views(
+    seed: int,
+    regime: Regime = "near",
+    *,
+    noises: tuple[bool, ...] = (False, True),
+    case: Case = "normal",
+    width_px: int = 1024,
+    height_px: int = 768,
+    bits: int | None = None,
+    image_name: str = "image.png",
+) -> list[SimulatedView]:
+    """The same scene exposed once per entry of ``noises`` (one render: clean and noisy twins)."""
     rng = np.random.default_rng(seed)
     craft = random_spacecraft(rng)
     az, el = float(rng.uniform(0, 360)), float(rng.uniform(25, 85))
     R_cam_enu = R_cam_from_enu(az, el)
     camera, t_cam_m, R, sun = _geometry(rng, craft, regime, case, width_px, height_px)
-    sensor = _sensor(regime, noise, bits)
-    # Render and expose (a blank view is sky and stars only).
+    # Render once (a blank view is sky and stars only), then expose per noise setting.
     if case == "blank":
         radiance = np.zeros((height_px, width_px))
     else:
         radiance = render(craft.mesh(), camera, R, t_cam_m, sun).radiance
-    image = expose(radiance, sensor, rng)
-    meta = _meta(camera, az, el, float(np.linalg.norm(t_cam_m)), craft, image_name)
-    truth = _truth(camera, craft, R, t_cam_m, sun, R_cam_enu, regime, case, seed, noise)
-    if case == "broken-meta":
-        field = BROKEN_META[seed % len(BROKEN_META)][0]
-        _break(meta, field, R_cam_enu)
-        truth["expected_error"] = {"code": "invalid_input", "field": field}
-    return SimulatedView(image, meta, truth)
+    views = []
+    for k, noise in enumerate(noises):
+        image = expose(radiance, _sensor(regime, noise, bits), np.random.default_rng([seed, k]))
+        meta = _meta(camera, az, el, float(np.linalg.norm(t_cam_m)), craft, image_name)
+        truth = _truth(camera, craft, R, t_cam_m, sun, R_cam_enu, regime, case, seed, noise)
+        if case == "broken-meta":
+            field = BROKEN_META[seed % len(BROKEN_META)][0]
+            _break(meta, field, R_cam_enu)
+            truth["expected_error"] = {"code": "invalid_input", "field": field}
+        views.append(SimulatedView(image, meta, truth))
+    return views
 
 
 def write_view(out: Path, view: SimulatedView) -> dict[str, Path]:
