@@ -29,7 +29,8 @@ NEAR_THRESHOLD_DEG = {False: 0.3, True: 0.5}  # clean, noisy
 
 def _angle_deg(a: Any, b: Any) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
-    return float(np.degrees(np.arccos(min(1.0, abs(float(a @ b) / np.linalg.norm(a) / np.linalg.norm(b))))))
+    c = abs(float(a @ b) / float(np.linalg.norm(a) * np.linalg.norm(b)))
+    return float(np.degrees(np.arccos(min(1.0, c))))
 
 
 def views(seed: int, regime: str, size: tuple[int, int]) -> list[SimulatedView]:
@@ -42,7 +43,8 @@ def views(seed: int, regime: str, size: tuple[int, int]) -> list[SimulatedView]:
     vs = simulate_views(seed, regime, noises=(False, True), width_px=size[0], height_px=size[1])  # type: ignore[arg-type]
     cache.parent.mkdir(parents=True, exist_ok=True)
     docs = json.dumps([{"meta": v.meta, "truth": v.truth} for v in vs])
-    np.savez_compressed(cache, docs=np.array(docs), **{f"image{k}": v.image for k, v in enumerate(vs)})
+    arrays: dict[str, np.ndarray] = {f"image{k}": v.image for k, v in enumerate(vs)}
+    np.savez_compressed(cache, docs=np.array(docs), **arrays)  # type: ignore[arg-type]
     return vs
 
 
@@ -55,7 +57,7 @@ def run_one(view: SimulatedView, method: str, *, drop_prior: bool = False) -> di
     full = 255.0 if view.image.dtype == np.uint8 else 65535.0
     t0 = time.perf_counter()
     try:
-        r = estimate_axis(gray, meta, EstimateOptions(method=method), full_scale=full)  # type: ignore[arg-type]
+        r = estimate_axis(gray, meta, EstimateOptions(method=method), full_scale=full)  # type: ignore[arg-type,unused-ignore]
     except InputError as exc:
         return {"refused": exc.code, "ms": 1000 * (time.perf_counter() - t0)}
     ms = 1000 * (time.perf_counter() - t0)
@@ -165,9 +167,9 @@ def plot(cases: list[dict[str, Any]], path: Path) -> None:
                 x, y = zip(*pts, strict=True)
                 ax.scatter(x, y, marker=marker, label=method, alpha=0.7)
         xs = np.logspace(-2.3, 0.5, 50)
-        ax.plot(xs, np.maximum(NEAR_THRESHOLD_DEG[noisy], 3 * xs), "k--", label="max(thr, 3 σ_CRLB)")
-        ax.plot(xs, xs, "k:", label="σ_CRLB")
-        ax.set(xscale="log", yscale="log", xlabel="σ_CRLB (deg)", title="noisy" if noisy else "clean")
+        ax.plot(xs, np.maximum(NEAR_THRESHOLD_DEG[noisy], 3 * xs), "k--", label="max(thr, 3 sigma_CRLB)")
+        ax.plot(xs, xs, "k:", label="sigma_CRLB")
+        ax.set(xscale="log", yscale="log", xlabel="sigma_CRLB (deg)", title="noisy" if noisy else "clean")
         ax.legend(fontsize=8)
     axes[0].set_ylabel("axis error (deg)")
     fig.tight_layout()
@@ -199,8 +201,8 @@ def main() -> None:
              "ours_no_prior": run_one(v, "ours", drop_prior=True)}
         )  # fmt: skip
     near_header = [
-        "pipeline", "answered", "median (deg)", "p90", "max", "within max(thr, 3σ_CRLB)",
-        "err > 3σ", "err > 5σ", "orthogonality median / p90 (n)", "ms/image",
+        "pipeline", "answered", "median (deg)", "p90", "max", "within max(thr, 3sigma_CRLB)",
+        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n)", "ms/image",
     ]  # fmt: skip
     ground_header = [
         "pipeline", "ambiguous", "best candidate median / max (deg)", "twin median", "axis error median / max",

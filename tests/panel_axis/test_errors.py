@@ -14,8 +14,6 @@ from tumblescan.panel_axis.meta import parse_meta
 from tumblescan.panel_axis.pipeline import load_input, run
 from tumblescan.panel_axis.simulate import BROKEN_META, simulate_view, write_view
 
-from .conftest import SIZE
-
 
 def _refusal(meta: Path) -> InputError:
     with pytest.raises(InputError) as exc:
@@ -39,7 +37,7 @@ def test_each_broken_meta_is_invalid_input_naming_its_field(seed: int) -> None:
 
 
 def test_the_simulator_writes_broken_meta_with_the_expected_error(tmp_path: Path) -> None:
-    write_view(tmp_path, simulate_view(1, case="broken-meta", **SIZE))
+    write_view(tmp_path, simulate_view(1, case="broken-meta", width_px=640, height_px=480))
     truth = json.loads((tmp_path / "truth.json").read_text())
     with pytest.raises(InputError) as exc:
         load_input(tmp_path / "meta.json")
@@ -52,7 +50,7 @@ def _broken(seed: int) -> dict[str, object]:
 
     meta = json.loads(json.dumps(_valid_meta()))
     sim._break(meta, BROKEN_META[seed][0], np.eye(3))
-    return meta  # type: ignore[no-any-return]
+    return meta  # type: ignore[no-any-return,unused-ignore]
 
 
 def _valid_meta() -> dict[str, object]:
@@ -118,7 +116,7 @@ def test_an_unreadable_image(tmp_path: Path) -> None:
 
 
 def test_a_blank_sky_has_no_target(tmp_path: Path) -> None:
-    write_view(tmp_path, simulate_view(1, case="blank", **SIZE))
+    write_view(tmp_path, simulate_view(1, case="blank", width_px=640, height_px=480))
     err = _refusal(tmp_path / "meta.json")
     assert err.code == "no_target" and err.field == "image"
 
@@ -137,6 +135,6 @@ def test_a_scalloped_blob_has_too_few_edges(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("case", "seed"), [("edge-on", 0), ("edge-on", 1), ("end-on", 0), ("end-on", 2)])
 def test_edge_on_and_end_on_views_are_degenerate(tmp_path: Path, case: str, seed: int) -> None:
-    write_view(tmp_path, simulate_view(seed, case=case, **SIZE))  # type: ignore[arg-type]
+    write_view(tmp_path, simulate_view(seed, case=case, width_px=640, height_px=480))  # type: ignore[arg-type]
     err = _refusal(tmp_path / "meta.json")
     assert err.code == "degenerate_view" and err.field == "image"

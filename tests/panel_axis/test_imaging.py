@@ -30,7 +30,7 @@ def test_undistort_inverts_opencv_distortion() -> None:
     ideal = np.array([[100.0, 50.0], [500.0, 400.0], [320.0, 240.0]])
     p = np.ascontiguousarray(cam.rays(ideal).reshape(-1, 1, 3))
     measured, _ = cv2.projectPoints(p, np.zeros((3, 1)), np.zeros((3, 1)), cam.K, np.array(cam.distortion))
-    assert np.allclose(cam.undistort(measured.reshape(-1, 2)), ideal, atol=1e-3)
+    assert np.allclose(cam.undistort(np.asarray(measured, dtype=float).reshape(-1, 2)), ideal, atol=1e-3)
 
 
 @pytest.mark.parametrize("half_width_m", [1.0, 1.07, 1.13])
@@ -47,7 +47,7 @@ def test_a_rendered_plate_has_its_edge_where_the_camera_puts_it_to_a_hundredth_o
     img = render(plate, cam, R, t, np.array([0.0, 0.0, -1.0])).radiance
     assert img[128, 128] == pytest.approx(1.04, abs=1e-6)  # lit face-on, plus ambient
     assert img[3, 3] == 0.0
-    img = cv2.GaussianBlur(img, (0, 0), 0.6)
+    img = np.asarray(cv2.GaussianBlur(img, (0, 0), 0.6), dtype=float)
     ends = cam.project(np.array([R @ [half_width_m, y, -0.01] + t for y in (-0.6, 0.6)]))
     line = fit_line(edge_points(img, ends.ravel()).uv_px)
     assert line is not None
@@ -57,7 +57,7 @@ def test_a_rendered_plate_has_its_edge_where_the_camera_puts_it_to_a_hundredth_o
 
 @pytest.mark.parametrize(("suffix", "dtype"), [(".png", np.uint8), (".png", np.uint16), (".tif", np.uint16)])
 def test_images_round_trip(tmp_path: Path, suffix: str, dtype: type) -> None:
-    a = (np.arange(80 * 96).reshape(80, 96) % 250).astype(dtype)
+    a: np.ndarray = (np.arange(80 * 96).reshape(80, 96) % 250).astype(dtype)
     write_image(tmp_path / f"x{suffix}", a)
     b = read_image(tmp_path / f"x{suffix}")
     assert b.dtype == dtype and np.array_equal(a, b)

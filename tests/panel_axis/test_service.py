@@ -44,7 +44,7 @@ def test_upload_runs_to_a_result_near_the_truth(http: httpx.Client, near_noisy: 
     assert done["status"] == "succeeded", done
     result = result_model("panel-axis").model_validate(done["result"])
     truth = json.loads((near_noisy / "truth.json").read_text())
-    err = np.degrees(np.arccos(min(1.0, abs(float(np.dot(result.axis.camera, truth["axis_camera"]))))))  # type: ignore[attr-defined]
+    err = np.degrees(np.arccos(min(1.0, abs(float(np.dot(result.axis.camera, truth["axis_camera"]))))))  # type: ignore[attr-defined,unused-ignore]
     assert err <= max(0.5, 3 * truth["sigma_crlb_deg"])
     overlay = http.get(f"/v1/jobs/{done['id']}/artifacts/overlay")
     assert overlay.status_code == 200 and overlay.content[:8] == b"\x89PNG\r\n\x1a\n"

@@ -10,6 +10,7 @@ projected bounding box are cast.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -72,13 +73,13 @@ def render(
     # The scene: vertices in target-centred camera axes (metres, float32-safe).
     scene = o3d.t.geometry.RaycastingScene()
     verts = (mesh.vertices_m @ R.T).astype(np.float32)
-    scene.add_triangles(o3d.core.Tensor(verts), o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    scene.add_triangles(_tensor(verts), _tensor(mesh.triangles.astype(np.uint32)))
     # Sub-pixel offsets of a regular grid, centred on the pixel centre.
     s = (np.arange(supersample) + 0.5) / supersample - 0.5
     ox, oy = (a.ravel() for a in np.meshgrid(s, s))
     n_sub = len(ox)
-    uu, vv = np.meshgrid(np.arange(u0, u1 + 1), np.arange(v0, v1 + 1))
-    uu, vv = uu.ravel(), vv.ravel()
+    grid_u, grid_v = np.meshgrid(np.arange(u0, u1 + 1), np.arange(v0, v1 + 1))
+    uu, vv = grid_u.ravel(), grid_v.ravel()
     pix_per_chunk = max(1, RAYS_PER_CHUNK // n_sub)
     start_dist = max(range_m - radius, 0.0)
     for c0 in range(0, len(uu), pix_per_chunk):
@@ -96,10 +97,9 @@ def render(
 
 def _shade(scene: object, mesh: Mesh, origin: FloatArray, d: FloatArray, sun: FloatArray, ambient: float) -> FloatArray:
     """Radiance of each ray (-1 where it misses)."""
-    import open3d as o3d
 
     rays = np.hstack([origin, d]).astype(np.float32)
-    ans = scene.cast_rays(o3d.core.Tensor(rays))  # type: ignore[attr-defined]
+    ans = scene.cast_rays(_tensor(rays))  # type: ignore[attr-defined]
     t_hit = ans["t_hit"].numpy().astype(float)
     hit = np.isfinite(t_hit)
     out = np.full(len(d), -1.0)
@@ -115,11 +115,17 @@ def _shade(scene: object, mesh: Mesh, origin: FloatArray, d: FloatArray, sun: Fl
     if lit.any():
         p = origin[hit][lit] + dh[lit] * t_hit[hit][lit, None] + SHADOW_OFFSET_M * n[lit]
         shadow_rays = np.hstack([p, np.broadcast_to(sun, p.shape)]).astype(np.float32)
-        occluded = scene.test_occlusions(o3d.core.Tensor(shadow_rays)).numpy().astype(bool)  # type: ignore[attr-defined]
+        occluded = scene.test_occlusions(_tensor(shadow_rays)).numpy().astype(bool)  # type: ignore[attr-defined]
         lit_idx = np.flatnonzero(lit)
         lit[lit_idx[occluded]] = False
     out[hit] = mesh.albedo[prim] * (np.where(lit, cos_sun, 0.0) + ambient)
     return out
+
+
+def _tensor(a: np.ndarray) -> Any:
+    import open3d as o3d
+
+    return o3d.core.Tensor(a)  # type: ignore[call-overload]
 
 
 def _pixel_box(camera: PinholeCamera, t_cam_m: FloatArray, radius_m: float) -> tuple[int, int, int, int] | None:

@@ -40,7 +40,7 @@ def expose(radiance: FloatArray, sensor: SensorModel, rng: np.random.Generator) 
         if e[int(v), int(u)] == 0:  # stars behind the target are hidden
             e[int(v), int(u)] += rng.uniform(0.2, 1.5) * sensor.electrons_full
     if sensor.psf_sigma_px > 0:
-        e = cv2.GaussianBlur(e, (0, 0), sensor.psf_sigma_px, borderType=cv2.BORDER_REFLECT)
+        e = np.asarray(cv2.GaussianBlur(e, (0, 0), sensor.psf_sigma_px, borderType=cv2.BORDER_REFLECT), dtype=float)
     angle = rng.uniform(0, 2 * np.pi)
     yy, xx = np.mgrid[0:H, 0:W]
     ramp = ((xx - W / 2) * np.cos(angle) + (yy - H / 2) * np.sin(angle)) / max(H, W)

@@ -76,14 +76,12 @@ class Family:
         return np.array([np.cos(m), np.sin(m)])
 
 
-def group_families(
-    edges: list[Edge], camera: PinholeCamera, rng: np.random.Generator, *, max_families: int = 4
-) -> list[Family]:
-    """Families of parallel 3D lines by RANSAC: a pair of planes proposes ``d = n_i × n_j``; an edge
-    agrees when its image direction is within 1.5° of the line from its centroid to the vanishing
-    point ``K·d`` (an image test: a hypothesis from two close lines is poor in depth but fine in the
-    image); the hypothesis with the most agreeing length wins, is refitted on its edges, and they
-    leave the pool."""
+def group_families(edges: list[Edge], camera: PinholeCamera, *, max_families: int = 4) -> list[Family]:
+    """Families of parallel 3D lines by RANSAC over every pair of the 30 longest edges: a pair of
+    planes proposes ``d = n_i × n_j``; an edge agrees when its image direction is within 1.5° of
+    the line from its centroid to the vanishing point ``K·d`` (an image test: a hypothesis from two
+    close lines is poor in depth but fine in the image); the hypothesis with the most agreeing
+    length wins, is refitted on its edges, and they leave the pool."""
     from .axis import fit_direction
 
     pool = sorted(edges, key=lambda e: -e.length_px)
@@ -91,23 +89,21 @@ def group_families(
     while len(pool) >= 2 and len(families) < max_families:
         top = pool[:30]
         pairs = [(i, j) for i in range(len(top)) for j in range(i + 1, len(top))]
-        if len(pairs) > 300:
-            pick = rng.choice(len(pairs), 300, replace=False)
-            pairs = [pairs[k] for k in pick]
         C = np.array([e.line.centroid_px for e in pool])
         T = np.array([e.line.direction for e in pool])
         lengths = np.array([e.length_px for e in pool])
-        best_score, best_in = 0.0, None
-        for i, j in pairs:
-            d = np.cross(top[i].plane.normal, top[j].plane.normal)
-            nd = np.linalg.norm(d)
-            if nd < 1e-12:
-                continue
-            inl = _agree(C, T, camera.K @ (d / nd))
-            score = float(lengths[inl].sum())
-            if score > best_score:
-                best_score, best_in = score, inl
-        if best_in is None or best_in.sum() < 2:
+        Ntop = np.array([e.plane.normal for e in top])
+        ij = np.array(pairs)
+        D = np.cross(Ntop[ij[:, 0]], Ntop[ij[:, 1]])
+        nd = np.linalg.norm(D, axis=1)
+        D = D[nd > 1e-12] / nd[nd > 1e-12, None]
+        if len(D) == 0:
+            break
+        agree = _agree(C, T, D @ camera.K.T)  # (hypotheses, edges)
+        scores = agree.astype(float) @ lengths
+        best = int(np.argmax(scores))
+        best_in = agree[best]
+        if best_in.sum() < 2:
             break
         members = [e for e, k in zip(pool, best_in, strict=True) if k]
         d = fit_direction([e.plane for e in members]).direction
@@ -119,10 +115,11 @@ def group_families(
 AGREE_SIN = np.sin(np.radians(1.5))
 
 
-def _agree(C: FloatArray, T: FloatArray, v_h: FloatArray) -> np.ndarray:
-    """Edges (centroids C, directions T) whose direction points at the vanishing point ``v_h``."""
+def _agree(C: FloatArray, T: FloatArray, V: FloatArray) -> np.ndarray:
+    """(H, M): whether edge m (centroid C[m], direction T[m]) points at vanishing point V[h] (homogeneous)."""
     # Direction from each centroid toward v (a point, or a direction when v_h[2] ~ 0).
-    to_v = v_h[None, :2] - C * v_h[2]
-    norm = np.linalg.norm(to_v, axis=1)
-    cross = np.abs(to_v[:, 0] * T[:, 1] - to_v[:, 1] * T[:, 0])
+    tx = V[:, None, 0] - C[None, :, 0] * V[:, None, 2]
+    ty = V[:, None, 1] - C[None, :, 1] * V[:, None, 2]
+    norm = np.hypot(tx, ty)
+    cross = np.abs(tx * T[None, :, 1] - ty * T[None, :, 0])
     return np.asarray(cross < AGREE_SIN * np.maximum(norm, 1e-300))

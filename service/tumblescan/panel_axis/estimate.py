@@ -79,7 +79,7 @@ def estimate_axis(
         )
     # 3-4. Families of parallel lines; the axis family and its direction.
     progress("families", 0.5)
-    families = group_families(edges, camera, rng)
+    families = group_families(edges, camera)
     axis_family = _axis_family(families, target, options.min_line_px)
     if axis_family is None:
         raise TooFewEdgesError("image: no two long edges share a 3D direction along the target", field="image")

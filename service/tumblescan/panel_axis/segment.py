@@ -54,7 +54,7 @@ def find_target(gray: FloatArray, full_scale: float) -> Target:
     # Dark panels can fall under Otsu's bus/panel split, so 6σ over the sky caps it; the floor
     # keeps a blank sky from passing for a target.
     thr = max(min(float(otsu), med + 6.0 * sigma), med + 4.0 * sigma + 2.0)
-    raw = (gray8.astype(float) - (sky - med) > thr).astype(np.uint8)
+    raw = (gray8.astype(np.float32) - (sky - med).astype(np.float32) > thr).astype(np.uint8)
     # Bridge thin yokes and blur gaps, then keep blobs that are not stars.
     joined = cv2.dilate(raw, np.ones((3, 3), np.uint8))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(joined, connectivity=8)
@@ -63,7 +63,9 @@ def find_target(gray: FloatArray, full_scale: float) -> Target:
         biggest = int(areas.max()) if len(areas) else 0
         raise NoTargetError(f"image: no target (largest blob {biggest} px, under {MIN_TARGET_PX} px)", field="image")
     keep = 1 + np.flatnonzero(areas >= max(MIN_BLOB_PX, 0.05 * areas.max()))
-    mask = np.isin(labels, keep) & (raw > 0)
+    lut = np.zeros(n, bool)
+    lut[keep] = True
+    mask = lut[labels] & (raw > 0)
     vs, us = np.nonzero(mask)
     H, W = gray.shape
     bbox = (int(us.min()), int(vs.min()), int(us.max()), int(vs.max()))
@@ -77,11 +79,21 @@ def _sky(gray8: np.ndarray, border_px: int = 8) -> tuple[FloatArray, float]:
     """The sky as a plane fitted to the image's border strips (two passes, dropping stars), and
     the noise σ about it (MAD)."""
     H, W = gray8.shape
-    vv, uu = np.mgrid[0:H, 0:W]
-    edge = np.zeros((H, W), bool)
-    edge[:border_px], edge[-border_px:], edge[:, :border_px], edge[:, -border_px:] = True, True, True, True
-    A = np.column_stack([uu[edge], vv[edge], np.ones(edge.sum())]).astype(float)
-    y = gray8[edge].astype(float)
+    b = border_px
+    strips = [
+        (slice(0, b), slice(0, W)),
+        (slice(H - b, H), slice(0, W)),
+        (slice(b, H - b), slice(0, b)),
+        (slice(b, H - b), slice(W - b, W)),
+    ]
+    us, vs, ys = [], [], []
+    for rows, cols in strips:
+        vv, uu = np.mgrid[rows, cols]
+        us.append(uu.ravel()[::3])  # every third pixel is plenty for three coefficients
+        vs.append(vv.ravel()[::3])
+        ys.append(gray8[rows, cols].ravel()[::3])
+    A = np.column_stack([np.concatenate(us), np.concatenate(vs), np.ones(sum(len(u) for u in us))]).astype(float)
+    y = np.concatenate(ys).astype(float)
     keep = np.ones(len(y), bool)
     coef = np.zeros(3)
     sigma = 1.0
@@ -90,7 +102,8 @@ def _sky(gray8: np.ndarray, border_px: int = 8) -> tuple[FloatArray, float]:
         r = y - A @ coef
         sigma = max(1.4826 * float(np.median(np.abs(r[keep] - np.median(r[keep])))), 0.5)
         keep = np.abs(r) < 4 * sigma + 1
-    return coef[0] * uu + coef[1] * vv + coef[2], sigma
+    plane = coef[0] * np.arange(W)[None, :] + coef[1] * np.arange(H)[:, None] + coef[2]
+    return plane, sigma
 
 
 def _shape(us: FloatArray, vs: FloatArray) -> tuple[FloatArray, float, float]:

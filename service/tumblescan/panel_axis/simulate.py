@@ -71,7 +71,14 @@ def simulate_view(
 ) -> SimulatedView:
     """Render one seeded view (see the module docstring)."""
     return simulate_views(
-        seed, regime, noises=(noise,), case=case, width_px=width_px, height_px=height_px, bits=bits, image_name=image_name
+        seed,
+        regime,
+        noises=(noise,),
+        case=case,
+        width_px=width_px,
+        height_px=height_px,
+        bits=bits,
+        image_name=image_name,
     )[0]
 
 
@@ -274,8 +281,8 @@ def _truth(
         "yaw_deg": yaw,
         "mirror_camera": canonical(axis_cam - 2 * (axis_cam @ los) * los, 0).tolist(),
         "panel_normal_camera": n_cam.tolist(),
-        "axis_to_los_deg": float(np.degrees(np.arccos(min(1.0, abs(axis_cam @ los))))),
-        "normal_to_los_deg": float(np.degrees(np.arccos(min(1.0, abs(n_cam @ los))))),
+        "axis_to_los_deg": float(np.degrees(np.arccos(min(1.0, abs(float(axis_cam @ los)))))),
+        "normal_to_los_deg": float(np.degrees(np.arccos(min(1.0, abs(float(n_cam @ los)))))),
         "sigma_crlb_deg": crlb_sigma_deg(camera, craft, R, t_cam_m) if case == "normal" else None,
         "wing_corners_px": corners,
         "R_cam_from_body": R.tolist(),

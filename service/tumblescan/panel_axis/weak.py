@@ -193,5 +193,5 @@ def _corner(rail_abc: FloatArray, s: float, a: FloatArray, cross: list[Edge]) ->
 
 def _point_segment_distance(p: FloatArray, a: FloatArray, b: FloatArray) -> float:
     ab = b - a
-    t = float(np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0, 1))
+    t = float(np.clip(float((p - a) @ ab) / max(float(ab @ ab), 1e-12), 0, 1))
     return float(np.linalg.norm(p - (a + t * ab)))
