@@ -129,3 +129,20 @@ def _cloud_near(tracks: Tracks) -> TimedCloud:
     rng = np.random.default_rng(0)
     t_s = np.sort(rng.uniform(tracks.t_s.min(), tracks.t_s.max(), 500))
     return TimedCloud(rng.normal(size=(500, 3)) + tracks.xyz_m.mean(axis=0), t_s, {})
+
+
+def test_every_kind_refuses_garbage_in_every_part_with_a_422(http: httpx.Client) -> None:
+    # Driven by GET /v1/kinds alone, so each new kind is covered from the day it is registered.
+    rng = np.random.default_rng(7)
+    for summary in http.get("/v1/kinds").json():
+        kind = http.get(summary["url"]).json()
+        for form in kind["forms"]:
+            for part in form["parts"]:
+                junk = [(p["name"], (f"{p['name']}.bin", rng.bytes(300))) for p in form["parts"] if p["required"]]
+                junk += [(part["name"], (f"{part['name']}.bin", b"\x00\x01garbage"))] if not part["required"] else []
+                r = http.post("/v1/jobs/upload", data={"kind": kind["name"]}, files=junk)
+                assert r.status_code == 422, (kind["name"], form["name"], part["name"], r.text)
+                assert r.json()["detail"]["field"], r.text
+            if form["json_input"]:
+                r = http.post("/v1/jobs", json={"kind": kind["name"], "input": {"nonsense": [1, 2, 3]}})
+                assert r.status_code == 422 and r.json()["detail"]["field"], r.text
