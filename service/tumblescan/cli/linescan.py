@@ -12,13 +12,13 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ..errors import InputError
-from ..linescan.options import FramesOptions, ModelChoice, Objective, Strategy, TracksOptions
-from ..linescan.sensor import SensorNoise
+from ..linescan.choices import ModelChoice, Objective, Strategy
 from .common import input_errors, json_stdout
 
 if TYPE_CHECKING:
     from ..linescan.pipeline import Outcome
     from ..linescan.result import MotionResult
+    from ..linescan.sensor import SensorNoise
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="linescan-motion: spin and precession from line-scan lidar."
@@ -104,6 +104,7 @@ def estimate(
 ) -> None:
     """Estimate the motion from feature tracks or dense frames and print it; frames (and a
     cloud given with tracks) are also rectified to the reference time."""
+    from ..linescan.options import FramesOptions, TracksOptions
     from ..linescan.pipeline import estimate_frames, estimate_tracks, input_form
 
     form = input_form(tracks_file)
@@ -184,6 +185,8 @@ def _sensor(
     declared: SensorNoise | None, range_sigma_m: float | None, angle_sigma_arcsec: float | None
 ) -> SensorNoise | None:
     """The declared noise (default: Table 1's) with the command line's overrides, or None without any."""
+    from ..linescan.sensor import SensorNoise
+
     if range_sigma_m is None and angle_sigma_arcsec is None:
         return None
     base = declared or SensorNoise()

@@ -12,15 +12,19 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from ..settings import Settings
 from .common import fail
+
+if TYPE_CHECKING:
+    from ..settings import Settings
 
 
 def _settings(**overrides: Any) -> Settings:
+    from ..settings import Settings
+
     return Settings(**{k: v for k, v in overrides.items() if v is not None})
 
 

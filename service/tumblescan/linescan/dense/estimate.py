@@ -25,23 +25,21 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
-from ...geometry.rotations import rotate
-from ...target.motion import rotation_matrices
 from ..errors import FramesUnusableError, NoSurfacesError
 from ..frames import Frames
-from ..initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
+from ..initializer import InitialGuess
 from ..options import FramesOptions
 from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validation_fields
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity, validation_frame_count
-from .consensus import INLIER_RAD, cone_consensus, pair_misfit, without_precession
+from .consensus import INLIER_RAD, pair_misfit, without_precession
 from .refine import DenseFit, refine_dense
-from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
+from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .search import OverlapCost, swarm_start
+from .starts import Start, consensus_start, registration_start, retimed, vote
 from .surfels import DenseData, prepare
 
 # Registration works on a thinned copy of each frame: this many points at most.
@@ -180,8 +178,8 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, 
     warnings."""
     mid, seed = setup.mid, setup.opts.seed
     attempts = (
-        (lambda: _vote(global_pairs, mid), "registration+cone+dense"),
-        (lambda: _consensus(global_pairs, mid, seed), "registration+consensus+dense"),
+        (lambda: vote(global_pairs, mid), "registration+cone+dense"),
+        (lambda: consensus_start(global_pairs, mid, seed), "registration+consensus+dense"),
         (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
     main: _Solve | None = None
@@ -242,104 +240,19 @@ def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> Flo
     return np.asarray(np.bincount(frame, weights=tau, minlength=n_frames) / np.bincount(frame, minlength=n_frames))
 
 
-def _retimed(
-    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms, start: _Start
-) -> FloatArray:
-    """Points moved to their frame's mean time, rotating at the mean angular velocity of the pairs
-    just before and after each frame. Voted start: the inlier pairs only (their median for a
-    frame with none), about their common fixed point. Otherwise: registered where the pair
-    agrees with the hypothesis, predicted by it where not, about the hypothesis's centre."""
-    ok = start.inliers
-    R = pairs.R if start.voted else np.where(ok[:, None, None], pairs.R, _predicted(start.guess.x, mid).R)
-    rotvec = Rotation.from_matrix(R).as_rotvec() / np.diff(mid)[:, None]
-    omega = np.empty((len(mid), 3))
-    for f in range(len(mid)):
-        near = [k for k in (f - 1, f) if 0 <= k < len(rotvec) and (ok[k] or not start.voted)]
-        omega[f] = rotvec[near].mean(axis=0) if near else np.median(rotvec[ok], axis=0)
-    center = center_from_transforms(pairs.R[ok], pairs.t[ok]) if start.voted else start.guess.x[6:9]
-    w = omega[frame]
-    rate = np.linalg.norm(w, axis=1)
-    axis = w / np.maximum(rate, 1e-300)[:, None]
-    return np.asarray(center + rotate(axis, rate * (mid[frame] - tau), xyz - center), dtype=float)
-
-
-def _predicted(x: FloatArray, mid: FloatArray) -> PairTransforms:
-    """The transforms between consecutive frames' mean times that motion ``x`` predicts."""
-    R = rotation_matrices(x, mid)
-    Q = R[1:] @ np.swapaxes(R[:-1], 1, 2)
-    center = x[6:9]
-    n = len(Q)
-    return PairTransforms(Q, center - Q @ center, np.zeros(n), np.zeros(n))
-
-
-def _registration_start(pairs: PairTransforms, start: _Start, mid: FloatArray) -> PairTransforms:
-    """ICP starts: the registered transform where the pair agrees with the hypothesis (or for
-    every pair after a vote), the predicted one where it does not (a pair registered onto a
-    turned copy gets another chance)."""
-    if start.voted:
-        return pairs
-    predicted = _predicted(start.guess.x, mid)
-    keep = start.inliers
-    return PairTransforms(
-        np.where(keep[:, None, None], pairs.R, predicted.R),
-        np.where(keep[:, None], pairs.t, predicted.t),
-        pairs.fitness,
-        pairs.rmse_m,
-    )
-
-
-@dataclass(frozen=True)
-class _Start:
-    """A starting motion and its inlier pairs; ``voted``: chosen by the vote on rotation angles."""
-
-    guess: InitialGuess
-    inliers: NDArray[np.bool_]
-    voted: bool = False
-
-
-def _vote(pairs: PairTransforms, mid: FloatArray) -> _Start:
-    """The cone on the pairs whose rotation angle is near the median (every pair of the cone
-    has the same angle): the path measured on the paper's grid."""
-    ok = consistent_pairs(pairs)
-    k = np.flatnonzero(ok)
-    if len(k) < 3:
-        raise FramesUnusableError(
-            f"only {len(k)} of {len(ok)} consecutive frame pairs could be registered consistently; the initial "
-            "motion needs 3 (do the frames overlap, and is the target rotating less than ~90 degrees per frame?)",
-            field="file",
-        )
-    try:
-        guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
-    except InitializerError as exc:
-        raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
-    return _Start(guess=guess, inliers=ok, voted=True)
-
-
-def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
-    try:
-        found = cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
-        return _Start(guess=found.guess, inliers=found.inliers)
-    except InitializerError as exc:
-        raise FramesUnusableError(
-            f"the initial motion could not be formed from the registered frame pairs: {exc} (do the frames "
-            "overlap, and is the target rotating less than ~90 degrees per frame?)",
-            field="file",
-        ) from None
-
-
-def _solve(setup: _Setup, pairs: PairTransforms, start: _Start, warnings: list[str], *, path: str) -> _Solve:
+def _solve(setup: _Setup, pairs: PairTransforms, start: Start, warnings: list[str], *, path: str) -> _Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
     for p in range(RETIME_PASSES):
         progress("registering", 0.1 * (p + 1) / RETIME_PASSES)
-        xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
-        initial = _registration_start(pairs, start, mid)
+        xyz = retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
+        initial = registration_start(pairs, start, mid)
         pairs = register_consecutive(
             reg.split(xyz, setup.data.n_frames), voxel_m=setup.voxel_m, initial=initial, seed=opts.seed
         )
-        start = _vote(pairs, mid) if start.voted else _consensus(pairs, mid, opts.seed)
+        start = vote(pairs, mid) if start.voted else consensus_start(pairs, mid, opts.seed)
     progress("initializing", 0.1)
     used = int(start.inliers.sum())
     if used < len(start.inliers):
@@ -383,7 +296,7 @@ def _poor_fit(fit: DenseFit) -> str | None:
     return None
 
 
-def _swarm(setup: _Setup, pairs: PairTransforms) -> _Start:
+def _swarm(setup: _Setup, pairs: PairTransforms) -> Start:
     """The swarm's start (:mod:`tumblescan.dense_search`) and the pairs that agree with it."""
     reg, mid, extent, seed = setup.reg, setup.mid, setup.extent_m, setup.opts.seed
     cost = OverlapCost.for_extent(reg.xyz_m, reg.tau_s, reg.frame, setup.data.n_frames, extent_m=extent, seed=seed)
@@ -391,7 +304,7 @@ def _swarm(setup: _Setup, pairs: PairTransforms) -> _Start:
         found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=seed)
     except ValueError as exc:
         raise FramesUnusableError(f"the swarm found no start: {exc}", field="file") from None
-    return _Start(
+    return Start(
         guess=InitialGuess(x=found.x, x_spin_only=without_precession(found.x), cone_collapsed=False, passes=1),
         inliers=pair_misfit(found.x, pairs.R, mid[:-1], mid[1:]) < INLIER_RAD,
     )
