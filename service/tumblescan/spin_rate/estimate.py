@@ -1,0 +1,360 @@
+"""The spin of a target from an image sequence: the recipe (ours, or the paper's)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._typing import FloatArray, Progress, no_progress
+from .coarse import lomb_scargle_rate, mask_orientation
+from .errors import NotConvergedError, TooFewFeaturesError, UndersampledError
+from .features import Features, extract
+from .meta import SpinInput
+from .options import EstimateOptions
+from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackObs
+from .rigid import Observations, RigidFit, fibonacci_sphere, fit_rigid, predict_lines, scan_cost
+from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
+
+MIN_TRACK_FRAMES = 3
+LONG_TRACK_FRAMES = 6
+DEFAULT_MAX_STEP_DEG = 90.0
+TRACKING_MAX_STEP_DEG = 60.0
+STATIC_MOTION_PX = 0.5
+SENSE_MIN_FROM_PLANE_DEG = 15.0
+TWIN_DELTA_CHI2 = 9.0
+SCAN_AXES = 200
+SCAN_TRACKS = 16
+REMATCH_PX = 2.0
+REMATCH_DEG = 3.0
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """Validated frames in memory: grayscale images (DN), times, the full scale and meta.json."""
+
+    grays: list[FloatArray]
+    t_s: FloatArray
+    full_scale: float
+    meta: SpinInput
+
+
+def estimate_spin(seq: Sequence, options: EstimateOptions | None = None, progress: Progress = no_progress) -> SpinResult:
+    """The recipe: refuse aliasing priors, find the target and its straight edges, track them,
+    then fit one rotation to every track (or the paper's sine fit)."""
+    opts = options or EstimateOptions()
+    clock = {"start": time.perf_counter()}
+    t, meta = seq.t_s, seq.meta
+    # 1. Sampling: refuse a prior that admits aliases; without one, assume under 90° per interval.
+    dt_med = float(np.median(np.diff(t)))
+    flags: list[str] = []
+    max_rate = meta.prior.max_rate_deg_s
+    if max_rate is not None and max_rate * dt_med >= 180.0:
+        raise UndersampledError(
+            f"prior.max_rate_deg_s: {max_rate} deg/s over a median interval of {dt_med:.4g} s is "
+            f"{max_rate * dt_med:.0f}° per frame (>= 180°): aliased rates cannot be told apart",
+            field="prior.max_rate_deg_s",
+        )
+    if max_rate is None:
+        flags.append("alias_unchecked")
+        max_rate = DEFAULT_MAX_STEP_DEG / dt_med
+    # 2-3. Target masks, LSD segments, line tracks.
+    feats = extract(seq.grays, seq.full_scale, meta.prior.target_polarity, progress)
+    clock["features"] = time.perf_counter()
+    tracks = [tr for tr in feats.tracks if len(tr) >= MIN_TRACK_FRAMES]
+    long_tracks = [tr for tr in tracks if max(tr.members) - min(tr.members) + 1 >= LONG_TRACK_FRAMES]
+    if len(long_tracks) < 2:
+        raise TooFewFeaturesError(
+            f"frames: {len(long_tracks)} line tracks span 6 or more frames (at least 2 are needed)", field="frames"
+        )
+    obs = _observations(seq, feats, tracks)
+    # 4. Static target: no edge moves above the noise.
+    motion = _track_motion_px(obs)
+    if motion < STATIC_MOTION_PX:
+        return _static_result(seq, feats, obs, motion, flags, clock)
+    if opts.method == "paper":
+        from .paper import paper_fit
+
+        return paper_fit(seq, feats, tracks, obs, flags, clock, max_rate)
+    # 5. Coarse rate: Lomb-Scargle of the mask orientation, and a scan of (rate, axis).
+    w_lo = np.radians(max(meta.prior.min_rate_deg_s or 0.0, 0.5 * 360.0 / (t[-1] - t[0]) / 20.0))
+    w_hi = np.radians(min(max_rate, TRACKING_MAX_STEP_DEG / dt_med))
+    span = float(t[-1] - t[0])
+    omegas = np.arange(w_lo, w_hi, np.radians(7.0) / span)
+    found = [k for k, tg in enumerate(feats.targets) if tg.mask is not None]
+    psi = np.array([mask_orientation(feats.targets[k].mask) for k in found])  # type: ignore[arg-type]
+    coarse = lomb_scargle_rate(t[found], psi, omegas)
+    c0 = _centre_guess(seq, feats)
+    radius = _radius_guess(seq, feats)
+    starts = _search(obs, omegas, c0, radius, t[0], coarse, progress)
+    clock["scan"] = time.perf_counter()
+    # 6. Short rigid fits from each start, the best carried on; re-match every frame's segments to
+    # its lines and refit.
+    trials = [fit_rigid(obs, w0, a0, cc, t[0], max_nfev=25, passes=1) for w0, a0, cc in starts]
+    best = min(trials, key=lambda f: f.cost)
+    fit = fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t[0])
+    progress("fit", 0.85)
+    obs2 = _rematch(seq, feats, fit, obs)
+    if obs2 is not None:
+        fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0])
+        obs = obs2
+    if not np.isfinite(fit.sigma_omega_rad_s) or not np.isfinite(fit.omega_rad_s):
+        raise NotConvergedError("frames: the rigid fit did not converge (σ not finite)", field="frames")
+    # 7. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
+    twin = fit_rigid(obs, fit.omega_rad_s, mirror_twin(fit.axis), fit.c0, t[0])
+    s2 = max(fit.rms_px**2, 1e-6)
+    if twin.cost < fit.cost:
+        fit, twin = twin, fit
+    ambiguous = 2 * (twin.cost - fit.cost) / s2 < TWIN_DELTA_CHI2
+    clock["fit"] = time.perf_counter()
+    return _result(seq, feats, obs, fit, twin if ambiguous else None, coarse, flags, clock)
+
+
+def _observations(seq: Sequence, feats: Features, tracks: list) -> Observations:  # type: ignore[type-arg]
+    cam = seq.meta.pinhole
+    trk, tt, ends, frames = [], [], [], []
+    for j, tr in enumerate(tracks):
+        for f, i in sorted(tr.members.items()):
+            trk.append(j)
+            tt.append(seq.t_s[f])
+            ends.append(cam.undistort(feats.segments[f].ends_px[i]))
+            frames.append(f)
+    obs = Observations.build(np.array(trk), np.array(tt), np.array(ends), cam.K)
+    return obs
+
+
+def _frame_of(seq: Sequence, obs: Observations) -> np.ndarray:
+    return np.searchsorted(seq.t_s, obs.t_s)
+
+
+def _track_motion_px(obs: Observations) -> float:
+    """Median over tracks of the largest distance of an end point to the track's first line (px)."""
+    out = []
+    for j in range(obs.n_tracks):
+        e = obs.ends_px[obs.track == j]
+        p, q = e[0]
+        d = (q - p) / np.linalg.norm(q - p)
+        n = np.array([-d[1], d[0]])
+        out.append(float(np.max(np.abs((e.reshape(-1, 2) - p) @ n))))
+    return float(np.median(out))
+
+
+def _centre_guess(seq: Sequence, feats: Features) -> FloatArray:
+    K = seq.meta.pinhole.K
+    cents = np.array([tg.centroid_px for tg in feats.targets if tg.centroid_px is not None])
+    u, v = cents.mean(axis=0)
+    return np.array([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], 1.0])
+
+
+def _radius_guess(seq: Sequence, feats: Features) -> float:
+    """The target's radius in units of the range (from the largest mask's extent)."""
+    ext = max(np.hypot(tg.bbox[2] - tg.bbox[0], tg.bbox[3] - tg.bbox[1]) for tg in feats.targets if tg.bbox)
+    return float(0.5 * ext / seq.meta.pinhole.focal_px)
+
+
+def _search(
+    obs: Observations, omegas: FloatArray, c0: FloatArray, radius: float, t_ref: float, coarse: float | None,
+    progress: Progress,
+) -> list[tuple[float, FloatArray, FloatArray]]:  # fmt: skip
+    """Starts (ω, axis, c0), best first (ω, axis, c0): a scan over rates and axes on the longest tracks, then the best
+    few basins (and the periodogram's peak) polished by Nelder-Mead over (ω, axis, c0_xy)."""
+    from scipy.optimize import minimize
+
+    lengths = np.bincount(obs.track)
+    keep = np.argsort(-lengths)[:SCAN_TRACKS]
+    sel = np.isin(obs.track, keep)
+    remap = np.full(len(lengths), -1)
+    remap[keep] = np.arange(len(keep))
+    sub = Observations.build(remap[obs.track[sel]], obs.t_s[sel], obs.ends_px[sel], obs.K)
+    axes = fibonacci_sphere(SCAN_AXES)
+    C = scan_cost(sub, omegas, axes, c0, t_ref, radius)
+    progress("scan", 0.7)
+    per_omega = C.min(axis=1)
+    starts = []
+    order = np.argsort(per_omega)
+    for k in order:
+        if all(abs(k - s) > 2 for s, _ in starts):
+            starts.append((int(k), int(np.argmin(C[k]))))
+        if len(starts) == 3:
+            break
+    cands = [(float(omegas[k]), axes[a]) for k, a in starts]
+    if coarse is not None:
+        k = int(np.argmin(np.abs(omegas - coarse)))
+        cands.append((coarse, axes[int(np.argmin(C[k]))]))
+
+    def cost(x: FloatArray, a0: FloatArray) -> float:
+        a = a0 + np.array([x[1], x[2], x[3]])
+        a = a / np.linalg.norm(a)
+        c = np.array([c0[0] + x[4], c0[1] + x[5], 1.0])
+        return float(scan_cost(sub, np.array([x[0]]), a[None], c, t_ref, radius)[0, 0])
+
+    polished: list[tuple[float, float, FloatArray, FloatArray]] = []
+    for w0, a0 in cands:
+        x0 = np.array([w0, 0, 0, 0, 0, 0])
+        simplex = x0 + np.vstack([np.zeros(6), np.diag([0.05 * w0, 0.15, 0.15, 0.15, radius * 0.2, radius * 0.2])])
+        r = minimize(cost, x0, args=(a0,), method="Nelder-Mead",
+                     options={"initial_simplex": simplex, "maxfev": 250, "xatol": 1e-6, "fatol": 1e-3})  # fmt: skip
+        a = a0 + r.x[1:4]
+        a = a / np.linalg.norm(a)
+        c = np.array([c0[0] + r.x[4], c0[1] + r.x[5], 1.0])
+        polished.append((float(r.fun), float(r.x[0]), a, c))
+    polished.sort(key=lambda p: p[0])
+    return [(w, a, c) for _, w, a, c in polished[:3]]
+
+
+def _rematch(seq: Sequence, feats: Features, fit: RigidFit, obs: Observations) -> Observations | None:
+    """Every frame's segments assigned to the nearest fitted line (both ends within ``REMATCH_PX``,
+    direction within ``REMATCH_DEG``): bridges missed frames and joins broken tracks."""
+    cam = seq.meta.pinhole
+    t_ref = float(seq.t_s[0])
+    inlier_tracks = [j for j in range(obs.n_tracks) if np.median(np.abs(fit.residuals_px.reshape(-1, 2)[obs.track == j])) < 1.0]
+    if len(inlier_tracks) < 2:
+        return None
+    trk, tt, ends = [], [], []
+    for f, segs in enumerate(feats.segments):
+        if len(segs) == 0:
+            continue
+        lines = predict_lines(fit, cam.K, float(seq.t_s[f]), t_ref)[inlier_tracks]
+        e = np.array([cam.undistort(s) for s in segs.ends_px])  # (S, 2, 2)
+        eh = np.concatenate([e, np.ones((*e.shape[:2], 1))], axis=2)
+        dist = np.abs(np.einsum("ski,li->slk", eh, lines)).max(axis=2)  # (S, L)
+        d = e[:, 1] - e[:, 0]
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        cosang = np.abs(d @ np.column_stack([-lines[:, 1], lines[:, 0]]).T)
+        dist[cosang < np.cos(np.radians(REMATCH_DEG))] = np.inf
+        for s in range(len(e)):
+            j = int(np.argmin(dist[s]))
+            if dist[s, j] < REMATCH_PX and int(np.argmin(dist[:, j])) == s:
+                trk.append(j)
+                tt.append(seq.t_s[f])
+                ends.append(e[s])
+    if not trk:
+        return None
+    trk_a = np.array(trk)
+    counts = np.bincount(trk_a, minlength=len(inlier_tracks))
+    good = np.flatnonzero(counts >= MIN_TRACK_FRAMES)
+    if len(good) < 2:
+        return None
+    remap = np.full(len(inlier_tracks), -1)
+    remap[good] = np.arange(len(good))
+    keep = remap[trk_a] >= 0
+    return Observations.build(remap[trk_a[keep]], np.array(tt)[keep], np.array(ends)[keep], cam.K)
+
+
+def _quality_common(seq: Sequence, feats: Features, obs: Observations, flags: list[str]) -> tuple[list[str], int]:
+    t = seq.t_s
+    if any(tg.touches_border for tg in feats.targets):
+        flags.append("target_touches_border")
+    if any(tg.saturated for tg in feats.targets):
+        flags.append("saturated")
+    if obs.n_tracks < 4:
+        flags.append("few_tracks")
+    return flags, int(sum(tg.found for tg in feats.targets)) if len(t) else 0
+
+
+def _frames_info(seq: Sequence, feats: Features, obs: Observations, resid: FloatArray | None) -> list[FrameInfo]:
+    fr = _frame_of(seq, obs)
+    out = []
+    for k, tg in enumerate(feats.targets):
+        here = fr == k
+        rms = None
+        if resid is not None and here.any():
+            rms = round(float(np.sqrt(np.mean(resid.reshape(-1, 2)[here] ** 2))), 4)
+        out.append(FrameInfo(
+            index=k, t_s=float(seq.t_s[k]), target_found=tg.found, target_area_px=tg.area_px,
+            centroid_px=None if tg.centroid_px is None else [round(float(x), 3) for x in tg.centroid_px],
+            lines=len(feats.segments[k]), tracked=int(here.sum()), rms_px=rms,
+        ))  # fmt: skip
+    return out
+
+
+def _tracks_out(seq: Sequence, obs: Observations, resid: FloatArray | None) -> list[TrackObs] | None:
+    fr = _frame_of(seq, obs)
+    r = resid.reshape(-1, 2) if resid is not None else np.zeros((len(obs.track), 2))
+    return [
+        TrackObs(track=int(j), frame=int(f), ends_px=np.round(e, 3).tolist(), residuals_px=np.round(rr, 4).tolist())
+        for j, f, e, rr in zip(obs.track, fr, obs.ends_px, r, strict=True)
+    ]
+
+
+def _timings(clock: dict[str, float]) -> dict[str, float]:
+    end = time.perf_counter()
+    keys = list(clock)
+    out = {}
+    for a, b in zip(keys[:-1], keys[1:], strict=True):
+        out[b] = round(1000 * (clock[b] - clock[a]), 1)
+    out["total"] = round(1000 * (end - clock["start"]), 1)
+    return out
+
+
+def _sampling(seq: Sequence, rate_deg_s: float) -> tuple[float, float, float]:
+    t = seq.t_s
+    dt_med = float(np.median(np.diff(t)))
+    return rate_deg_s * (t[-1] - t[0]) / 360.0, rate_deg_s * dt_med, 180.0 / dt_med
+
+
+def _result(
+    seq: Sequence, feats: Features, obs: Observations, fit: RigidFit, twin: RigidFit | None, coarse: float | None,
+    flags: list[str], clock: dict[str, float],
+) -> SpinResult:  # fmt: skip
+    rate = float(np.degrees(fit.omega_rad_s))
+    sigma = float(np.degrees(fit.sigma_omega_rad_s))
+    a = fit.axis
+    min_rate = seq.meta.prior.min_rate_deg_s
+    spinning = not (min_rate is not None and rate < min_rate)
+    los = los_angle_deg(a)
+    sense = int(np.sign(a[2])) if 90.0 - los > SENSE_MIN_FROM_PLANE_DEG else None
+    revs, step, nyq = _sampling(seq, rate)
+    flags, n_found = _quality_common(seq, feats, obs, flags)
+    if revs < 0.25:
+        flags.append("short_arc")
+    if twin is not None:
+        flags.append("weak_perspective")
+    sig_axis = float(np.degrees(np.sqrt(max(np.trace(fit.cov_axis_rad2), 0.0))))
+    period = 360.0 / rate if rate > 0 else None
+    spin = Spin(
+        spinning=spinning, rate_deg_s=round(rate, 6), sigma_rate_deg_s=round(sigma, 6),
+        rate_rad_s=round(fit.omega_rad_s, 8), period_s=None if period is None else round(period, 6),
+        sigma_period_s=None if period is None else round(period * sigma / rate, 6),
+        sense_about_los=sense if spinning else None,  # type: ignore[arg-type]
+        axis_camera=[round(float(x), 6) for x in a] if spinning else None,
+        sigma_axis_deg=round(sig_axis, 4) if spinning else None, axis_ambiguous=twin is not None,
+        axis_candidates=[] if twin is None else [AxisCandidate(axis_camera=[round(float(x), 6) for x in twin.axis],
+                                                               kind="mirror", cost=round(twin.cost / fit.cost, 4))],
+        axis_los_angle_deg=round(los, 4) if spinning else None,
+        projected_axis_angle_deg=round(projected_angle_deg(a), 4) if spinning else None,
+        reference_time_s=float(seq.t_s[0]),
+        coarse_rate_deg_s=None if coarse is None else round(float(np.degrees(coarse)), 4),
+    )  # fmt: skip
+    quality = Quality(
+        frames_used=len(seq.t_s), frames_with_target=n_found, line_tracks=obs.n_tracks,
+        observations=len(obs.track), fit_rms_px=round(fit.rms_px, 4), revolutions_covered=round(revs, 4),
+        step_deg_median=round(step, 4), nyquist_rate_deg_s=round(nyq, 4), model="rigid", flags=flags,  # type: ignore[arg-type]
+    )  # fmt: skip
+    tracks = _tracks_out(seq, obs, fit.residuals_px) if seq.meta.options.return_tracks else None
+    return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, fit.residuals_px),
+                      tracks=tracks, timings_ms=_timings(clock))  # fmt: skip
+
+
+def _static_result(
+    seq: Sequence, feats: Features, obs: Observations, motion_px: float, flags: list[str], clock: dict[str, float]
+) -> SpinResult:
+    """Not spinning: the rate bound is what a motion of ``motion_px`` at the target's radius over the span means."""
+    span = float(seq.t_s[-1] - seq.t_s[0])
+    r_px = max(_radius_guess(seq, feats) * seq.meta.pinhole.focal_px, 1.0)
+    bound = float(np.degrees(max(motion_px, STATIC_MOTION_PX) / r_px) / span)
+    flags, n_found = _quality_common(seq, feats, obs, flags)
+    spin = Spin(
+        spinning=False, rate_deg_s=0.0, sigma_rate_deg_s=round(bound, 6), rate_rad_s=0.0, period_s=None,
+        sigma_period_s=None, sense_about_los=None, axis_camera=None, sigma_axis_deg=None, axis_ambiguous=False,
+        axis_candidates=[], axis_los_angle_deg=None, projected_axis_angle_deg=None,
+        reference_time_s=float(seq.t_s[0]),
+    )  # fmt: skip
+    _, _, nyq = _sampling(seq, 0.0)
+    quality = Quality(
+        frames_used=len(seq.t_s), frames_with_target=n_found, line_tracks=obs.n_tracks, observations=len(obs.track),
+        fit_rms_px=round(motion_px, 4), revolutions_covered=0.0, step_deg_median=0.0, nyquist_rate_deg_s=round(nyq, 4),
+        model="static", flags=flags,  # type: ignore[arg-type]
+    )  # fmt: skip
+    return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, None), timings_ms=_timings(clock))

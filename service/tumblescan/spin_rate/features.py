@@ -1,0 +1,46 @@
+"""From frames to line observations: target masks, segments, tracks (steps 1-3 of the recipe)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._typing import FloatArray, Progress
+from .errors import NoTargetError
+from .segments import Segments, frame_segments
+from .target import TargetMask, find_target, to_gray8
+from .tracking import Track, build_tracks, match, predict_affine
+
+
+@dataclass
+class Features:
+    targets: list[TargetMask]
+    segments: list[Segments]
+    tracks: list[Track]
+    rotation_deg: dict[tuple[int, int], float]
+
+
+def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress: Progress) -> Features:
+    """Masks, LSD segments and tracks of every frame; ``NoTargetError`` when the target is found in
+    fewer than half the frames."""
+    targets = [find_target(g, full_scale, polarity) for g in grays]
+    found = [k for k, t in enumerate(targets) if t.found]
+    if len(found) < max(len(grays) / 2, 2):
+        raise NoTargetError(
+            f"frames: the target was found in {len(found)} of {len(grays)} frames "
+            f"(a blob of at least 150 px above the sky in at least half of them is needed)",
+            field="frames",
+        )
+    segments = []
+    for k, (g, t) in enumerate(zip(grays, targets, strict=True)):
+        segments.append(frame_segments(g, to_gray8(g, t, full_scale, polarity), t))
+        progress("lines", 0.1 + 0.3 * k / len(grays))
+    pairs: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    rotation: dict[tuple[int, int], float] = {}
+    for n, (k, l_) in enumerate(zip(found[:-1], found[1:], strict=True)):
+        A, ang = predict_affine(grays[k], grays[l_], targets[k], targets[l_])
+        pairs[(k, l_)] = match(segments[k].ends_px, segments[l_].ends_px, A)
+        rotation[(k, l_)] = float(np.degrees(np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])))
+        progress("tracking", 0.4 + 0.2 * n / max(len(found) - 1, 1))
+    return Features(targets, segments, build_tracks(segments, pairs), rotation)

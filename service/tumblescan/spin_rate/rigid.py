@@ -1,0 +1,257 @@
+"""The rigid-body fit: one rotation (axis, rate, phase) shared by every line track, perspective-correct.
+
+Model (digest §5.1): a body line through ``p`` with direction ``d`` (reference frame at
+``t_ref``) is at time t the 3D line through ``X(t) = c(t) + R(t)·p`` along ``D(t) = R(t)·d``,
+``R(t) = Rot(a, ω (t - t_ref))``, ``c(t) = c0 + v (t - t_ref)``. Its image is the line
+``l(t) = (K X) × (K D)``; the residual of an observed end point ``e`` is its signed distance
+``eᵀl / ‖l₁₂‖`` (px). Depth is a gauge: ``c0_z = 1`` (all lengths in units of the range).
+
+Initial values come from a scan: for a trial (ω, a) each track's plane normals ``n_i = Kᵀ l_i``,
+turned back to the reference frame, must all be orthogonal to the line's ``d``; the smallest
+eigenvalue of their scatter is the track's cost (variable projection, linear in the structure).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._typing import FloatArray, IntArray
+from .rotation import rot, tangent_basis
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Line observations: track index (O,), time (O,, s), end points (O, 2, 2, ideal px), plane normals (O, 3)."""
+
+    track: IntArray
+    t_s: FloatArray
+    ends_px: FloatArray
+    normals: FloatArray
+    K: FloatArray
+
+    @staticmethod
+    def build(track: IntArray, t_s: FloatArray, ends_px: FloatArray, K: FloatArray) -> Observations:
+        order = np.argsort(track, kind="stable")
+        track, t_s, ends_px = track[order], t_s[order], ends_px[order]
+        e = np.concatenate([ends_px, np.ones((*ends_px.shape[:2], 1))], axis=2)
+        n = np.cross(e[:, 0], e[:, 1]) @ K  # Kᵀ l, row-wise
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        return Observations(track, t_s, ends_px, n, K)
+
+    @property
+    def n_tracks(self) -> int:
+        return int(self.track.max()) + 1 if len(self.track) else 0
+
+
+@dataclass(frozen=True)
+class RigidFit:
+    """A converged rigid fit: rate (rad/s, ≥ 0), unit axis, centre, line structure and statistics."""
+
+    omega_rad_s: float
+    axis: FloatArray
+    c0: FloatArray
+    velocity: FloatArray
+    lines_p: FloatArray
+    lines_d: FloatArray
+    cost: float
+    residuals_px: FloatArray
+    weights: FloatArray
+    sigma_omega_rad_s: float
+    cov_axis_rad2: FloatArray
+    rms_px: float
+    success: bool
+
+
+def fibonacci_sphere(n: int) -> FloatArray:
+    """``n`` nearly uniform unit vectors on the sphere."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = np.pi * (1 + 5**0.5) * k
+    r = np.sqrt(1 - z**2)
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+def scan_cost(
+    obs: Observations, omegas: FloatArray, axes: FloatArray, c0: FloatArray, t_ref: float, radius: float,
+    clip_px: float = 3.0,
+) -> FloatArray:
+    """The scan's cost (len(omegas), len(axes)) in px²: for a trial (ω, a), each track's planes
+    ``(m_i, n_i·c0)`` (the back-projected planes, turned back to the reference frame) must share one
+    line; the two smallest eigenvectors of their 4x4 scatter are two homogeneous points on it
+    (linear), then each end point's
+    distance to that line re-projected at its time, squared and clipped at ``clip_px``, is summed."""
+    starts = np.flatnonzero(np.r_[True, obs.track[1:] != obs.track[:-1]])
+    n = obs.normals
+    q = n @ c0
+    dt = obs.t_s - t_ref
+    e_h = np.concatenate([obs.ends_px, np.ones((*obs.ends_px.shape[:2], 1))], axis=2)  # (O, 2, 3)
+    out = np.empty((len(omegas), len(axes)))
+    for k, w in enumerate(omegas):
+        m = _turn(axes, n[None], -w * dt)  # (A, O, 3)
+        # Conditioning: the structure is within ``radius`` of the centre, so scale X = radius·X'.
+        pi = np.concatenate([m * radius, np.broadcast_to(q[None, :, None], (*m.shape[:2], 1))], axis=2)
+        S = np.add.reduceat(pi[..., :, None] * pi[..., None, :], starts, axis=1)  # (A, T, 4, 4)
+        _, V = np.linalg.eigh(S)
+        pts = V[..., :2][:, obs.track]  # (A, O, 4, 2): two homogeneous points spanning the line
+        X1 = _turn(axes, pts[..., :3, 0] * radius, w * dt) + pts[..., 3, 0, None] * c0
+        X2 = _turn(axes, pts[..., :3, 1] * radius, w * dt) + pts[..., 3, 1, None] * c0
+        line = np.cross(X1 @ obs.K.T, X2 @ obs.K.T)
+        line /= np.maximum(np.linalg.norm(line[..., :2], axis=-1, keepdims=True), 1e-12)
+        r = np.einsum("oki,aoi->aok", e_h, line)
+        out[k] = np.minimum(r**2, clip_px**2).sum(axis=(1, 2))
+    return out
+
+
+def _turn(axes: FloatArray, v: FloatArray, angle: FloatArray) -> FloatArray:
+    """Rodrigues for many axes (A, 3) and vectors (A or 1, O, 3) by angles (O,) -> (A, O, 3)."""
+    c = np.cos(angle)[None, :, None]
+    s = np.sin(angle)[None, :, None]
+    a = axes[:, None, :]
+    return np.asarray(v * c + np.cross(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
+
+
+def init_structure(obs: Observations, omega: float, axis: FloatArray, c0: FloatArray, t_ref: float) -> tuple[FloatArray, FloatArray]:
+    """Each line's direction ``d`` (smallest eigenvector of its turned-back normals) and point ``p``
+    (least squares of ``m_i·p = -n_i·c``, p orthogonal to d)."""
+    R_back = rot(axis, -omega * (obs.t_s - t_ref))
+    m = np.einsum("oij,oj->oi", R_back, obs.normals)
+    P, D = [], []
+    for j in range(obs.n_tracks):
+        sel = obs.track == j
+        mj = m[sel]
+        _, vecs = np.linalg.eigh(mj.T @ mj)
+        d = vecs[:, 0]
+        f1, f2 = tangent_basis(d)
+        B = np.column_stack([f1, f2])
+        y = np.linalg.lstsq(mj @ B, -obs.normals[sel] @ c0, rcond=None)[0]
+        P.append(B @ y)
+        D.append(d)
+    return np.array(P), np.array(D)
+
+
+class _Model:
+    """Parameter packing and residuals of the rigid model."""
+
+    def __init__(self, obs: Observations, axis0: FloatArray, p0: FloatArray, d0: FloatArray, t_ref: float, drift: bool) -> None:
+        self.obs, self.t_ref, self.drift = obs, t_ref, drift
+        self.axis0 = axis0
+        self.e_axis = tangent_basis(axis0)
+        self.p0, self.d0 = p0, d0
+        self.f = np.array([np.column_stack(tangent_basis(d)) for d in d0])  # (T, 3, 2)
+        self.n_global = 5 + (2 if drift else 0)
+        e = obs.ends_px
+        self.e_h = np.concatenate([e, np.ones((*e.shape[:2], 1))], axis=2)  # (O, 2, 3)
+
+    def unpack(self, x: FloatArray) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        omega = float(x[0])
+        a = self.axis0 + x[1] * self.e_axis[0] + x[2] * self.e_axis[1]
+        a = a / np.linalg.norm(a)
+        c0 = np.array([x[3], x[4], 1.0])
+        v = np.array([x[5], x[6], 0.0]) if self.drift else np.zeros(3)
+        L = x[self.n_global :].reshape(-1, 4)
+        d = self.d0 + np.einsum("tij,tj->ti", self.f, L[:, :2])
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        p = self.p0 + np.einsum("tij,tj->ti", self.f, L[:, 2:])
+        return omega, a, c0, v, p, d
+
+    def residuals(self, x: FloatArray) -> FloatArray:
+        omega, a, c0, v, p, d = self.unpack(x)
+        o = self.obs
+        dt = o.t_s - self.t_ref
+        R = rot(a, omega * dt)
+        X = c0 + v * dt[:, None] + np.einsum("oij,oj->oi", R, p[o.track])
+        D = np.einsum("oij,oj->oi", R, d[o.track])
+        line = np.cross(X @ o.K.T, D @ o.K.T)
+        line = line / np.linalg.norm(line[:, :2], axis=1, keepdims=True)
+        return np.asarray(np.einsum("oki,oi->ok", self.e_h, line).ravel(), dtype=float)
+
+    def sparsity(self) -> object:
+        from scipy.sparse import lil_matrix
+
+        o = self.obs
+        n = self.n_global + 4 * o.n_tracks
+        S = lil_matrix((2 * len(o.track), n), dtype=int)
+        S[:, : self.n_global] = 1
+        for k, j in enumerate(o.track):
+            S[2 * k : 2 * k + 2, self.n_global + 4 * j : self.n_global + 4 * j + 4] = 1
+        return S
+
+
+def fit_rigid(
+    obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float, *, drift: bool = False,
+    max_nfev: int = 60, passes: int = 2,
+) -> RigidFit:  # fmt: skip
+    """Robust (Cauchy) least squares of the rigid model from a start; σ from the Jacobian.
+
+    Parameters
+    ----------
+    obs : the line observations (ideal px).
+    omega0 : float, starting rate (rad/s); axis0 : (3,) unit starting axis (camera frame).
+    c0 : (3,) starting centre with ``c0_z = 1``; t_ref : float, reference time (s).
+    drift : also fit a centre velocity in the image plane.
+    passes : robust passes (the second rescales the Cauchy loss to the first one's residuals).
+    """
+    from scipy.optimize import least_squares
+
+    p0, d0 = init_structure(obs, omega0, axis0, c0, t_ref)
+    model = _Model(obs, axis0, p0, d0, t_ref, drift)
+    x0 = np.concatenate([[omega0, 0.0, 0.0, c0[0], c0[1]], np.zeros(2 if drift else 0), np.zeros(4 * obs.n_tracks)])
+    sparsity = model.sparsity()
+    scale = 1.0
+    res = None
+    for _ in range(passes):  # the second pass rescales the loss to the residuals of the first
+        res = least_squares(model.residuals, x0, jac_sparsity=sparsity, loss="cauchy", f_scale=scale, method="trf",
+                            x_scale="jac", max_nfev=max_nfev)  # fmt: skip
+        x0 = res.x
+        r = model.residuals(x0)
+        scale = max(2.0 * 1.4826 * float(np.median(np.abs(r))), 0.05)
+    assert res is not None
+    r = model.residuals(x0)
+    w = 1.0 / (1.0 + (r / scale) ** 2)
+    J = _jacobian(model, x0)
+    n_par = J.shape[1]
+    s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
+    JW = J * np.sqrt(w)[:, None]
+    cov = np.linalg.pinv(JW.T @ JW, rcond=1e-10, hermitian=True) * s2
+    omega, a, c, v, p, d = model.unpack(x0)
+    if omega < 0:  # the same motion: spin vector ω·a
+        omega, a = -omega, -a
+    return RigidFit(
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=float(res.cost), residuals_px=r,
+        weights=w, sigma_omega_rad_s=float(np.sqrt(max(cov[0, 0], 0.0))), cov_axis_rad2=cov[1:3, 1:3],
+        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success),
+    )  # fmt: skip
+
+
+def _jacobian(model: _Model, x: FloatArray) -> FloatArray:
+    """Central-difference Jacobian of the raw residuals. A line's parameters touch only its own
+    residuals, so the k-th parameter of every line is stepped at once (4 groups)."""
+    n = len(x)
+    g = model.n_global
+    m = 2 * len(model.obs.track)
+    J = np.zeros((m, n))
+    rows_track = np.repeat(model.obs.track, 2)
+    for k in range(g):
+        h = 1e-6 * max(abs(x[k]), 1e-2)
+        dx = np.zeros(n)
+        dx[k] = h
+        J[:, k] = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
+    h = 1e-6
+    for k in range(4):
+        dx = np.zeros(n)
+        dx[g + k :: 4] = h
+        col = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
+        J[np.arange(m), g + 4 * rows_track + k] = col
+    return J
+
+
+def predict_lines(fit: RigidFit, K: FloatArray, t_s: float, t_ref: float) -> FloatArray:
+    """Every line's image ``(a, b, c)`` (T, 3) at time ``t_s``, normalised so ``a² + b² = 1``."""
+    dt = t_s - t_ref
+    R = rot(fit.axis, fit.omega_rad_s * dt)[0]
+    X = fit.c0 + fit.velocity * dt + fit.lines_p @ R.T
+    D = fit.lines_d @ R.T
+    line = np.cross(X @ K.T, D @ K.T)
+    return np.asarray(line / np.linalg.norm(line[:, :2], axis=1, keepdims=True), dtype=float)

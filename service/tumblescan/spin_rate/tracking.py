@@ -1,0 +1,138 @@
+"""Line tracks across frames: predict each frame from the last (the target mask turned about its
+centroid, refined by ECC affine alignment), then match segments by the paper's similarities
+(angle, perpendicular offset, overlap, length ratio), mutual best only."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._typing import FloatArray
+from .segments import Segments
+from .target import TargetMask
+
+ANGLE_GRID_DEG = np.arange(-60.0, 60.01, 2.0)
+MAX_ANGLE_DEG = 8.0
+MAX_OFFSET_PX = 5.0
+MIN_SIMILARITY = 0.05
+
+
+@dataclass
+class Track:
+    """One straight edge followed through the frames: frame index -> segment index in that frame."""
+
+    members: dict[int, int] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+
+def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: TargetMask) -> tuple[FloatArray, float]:
+    """The 2x3 affine taking frame ``prev``'s pixels to ``next_``'s, and the in-image rotation (deg)
+    of the mask grid search that seeded it."""
+    import cv2
+
+    assert tp.mask is not None and tn.mask is not None and tp.bbox is not None and tn.bbox is not None
+    assert tp.centroid_px is not None and tn.centroid_px is not None
+    H, W = prev.shape
+    pad = 12
+    u0 = max(min(tp.bbox[0], tn.bbox[0]) - pad, 0)
+    v0 = max(min(tp.bbox[1], tn.bbox[1]) - pad, 0)
+    u1 = min(max(tp.bbox[2], tn.bbox[2]) + pad, W - 1)
+    v1 = min(max(tp.bbox[3], tn.bbox[3]) + pad, H - 1)
+    o = np.array([u0, v0], dtype=float)
+    # Step 1: edge-strength images (robust to shading changes), half resolution; the previous one
+    # turned about its centroid on a 2° grid, the shift from phase correlation; best response wins.
+    gp = _edges(prev[v0 : v1 + 1, u0 : u1 + 1])
+    gn = _edges(next_[v0 : v1 + 1, u0 : u1 + 1])
+    cp = (tp.centroid_px - o) * 0.5
+    win = cv2.createHanningWindow((gn.shape[1], gn.shape[0]), cv2.CV_32F)
+    best, best_angle, best_shift = -1.0, 0.0, np.zeros(2)
+    for ang in ANGLE_GRID_DEG:
+        R = cv2.getRotationMatrix2D((float(cp[0]), float(cp[1])), float(ang), 1.0)
+        warped = cv2.warpAffine(gp, R, (gn.shape[1], gn.shape[0]))
+        shift, response = cv2.phaseCorrelate(warped, gn, win)
+        if response > best:
+            best, best_angle, best_shift = float(response), float(ang), np.array(shift, dtype=float)
+    M = cv2.getRotationMatrix2D((float(tp.centroid_px[0] - o[0]), float(tp.centroid_px[1] - o[1])), best_angle, 1.0)
+    M[:, 2] += 2.0 * best_shift
+    # Step 2: ECC affine on blurred crops (warp maps next -> prev), seeded with the inverse of M.
+    ip = cv2.GaussianBlur(prev[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
+    inn = cv2.GaussianBlur(next_[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
+    warp = cv2.invertAffineTransform(M).astype(np.float32)
+    try:
+        _, warp = cv2.findTransformECC(
+            inn, ip, warp, cv2.MOTION_AFFINE, (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 60, 1e-5), None, 5
+        )
+        M = cv2.invertAffineTransform(warp)
+    except cv2.error:
+        pass  # ECC did not converge: keep the mask rotation
+    # Back to full-image coordinates: x_n = A x_p + b in crop coordinates.
+    A, b = M[:, :2].astype(float), M[:, 2].astype(float)
+    return np.column_stack([A, A @ -o + b + o]), best_angle
+
+
+def _edges(img: FloatArray) -> np.ndarray:
+    """Gradient magnitude, blurred and halved (float32)."""
+    import cv2
+
+    f = img.astype(np.float32)
+    g = cv2.magnitude(cv2.Sobel(f, cv2.CV_32F, 1, 0), cv2.Sobel(f, cv2.CV_32F, 0, 1))
+    g = cv2.GaussianBlur(g, (0, 0), 1.5)
+    return np.asarray(cv2.resize(g, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA), dtype=np.float32)
+
+
+def match(prev: FloatArray, nxt: FloatArray, affine: FloatArray) -> list[tuple[int, int]]:
+    """Mutual-best pairs (i in ``prev``, j in ``nxt``) of segments (N, 2, 2) after mapping ``prev``
+    through ``affine``: ``sim = s_len·s_ang·s_off·overlap`` above ``MIN_SIMILARITY``."""
+    if len(prev) == 0 or len(nxt) == 0:
+        return []
+    A, b = affine[:, :2], affine[:, 2]
+    p = prev @ A.T + b
+    sim = np.zeros((len(p), len(nxt)))
+    tp, Lp = _dir(p)
+    tn, Ln = _dir(nxt)
+    cos = np.abs(tp @ tn.T)
+    ang = np.degrees(np.arccos(np.clip(cos, 0, 1)))
+    for i in range(len(p)):
+        ok = np.flatnonzero(ang[i] < MAX_ANGLE_DEG)
+        if not len(ok):
+            continue
+        n_i = np.array([-tp[i, 1], tp[i, 0]])
+        q = nxt[ok]
+        off = np.abs((q - p[i, 0]) @ n_i).mean(axis=1)
+        s = (q - p[i, 0]) @ tp[i]
+        lo, hi = np.minimum(s[:, 0], s[:, 1]), np.maximum(s[:, 0], s[:, 1])
+        overlap = np.clip(np.minimum(hi, Lp[i]) - np.maximum(lo, 0.0), 0, None) / np.minimum(Lp[i], Ln[ok])
+        s_len = np.minimum(Lp[i], Ln[ok]) / np.maximum(Lp[i], Ln[ok])
+        s_ang = 1 - ang[i, ok] / MAX_ANGLE_DEG
+        s_off = np.exp(-0.5 * (off / (MAX_OFFSET_PX / 2)) ** 2) * (off < MAX_OFFSET_PX)
+        sim[i, ok] = np.sqrt(s_len) * s_ang * s_off * np.clip(overlap, 0, 1)
+    pairs = []
+    for i in range(len(p)):
+        j = int(np.argmax(sim[i]))
+        if sim[i, j] > MIN_SIMILARITY and int(np.argmax(sim[:, j])) == i:
+            pairs.append((i, j))
+    return pairs
+
+
+def build_tracks(segments: list[Segments], pairs: dict[tuple[int, int], list[tuple[int, int]]]) -> list[Track]:
+    """Chain frame-to-frame pairs (``(k, l)`` frames -> segment pairs) into tracks."""
+    tracks: list[Track] = []
+    open_: dict[tuple[int, int], Track] = {}
+    for (k, l_), matched in sorted(pairs.items()):
+        for i, j in matched:
+            tr = open_.pop((k, i), None)
+            if tr is None:
+                tr = Track({k: i})
+                tracks.append(tr)
+            tr.members[l_] = j
+            open_[(l_, j)] = tr
+    return tracks
+
+
+def _dir(seg: FloatArray) -> tuple[FloatArray, FloatArray]:
+    d = seg[:, 1] - seg[:, 0]
+    L = np.linalg.norm(d, axis=1)
+    return d / np.maximum(L, 1e-9)[:, None], L
