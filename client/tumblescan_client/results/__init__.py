@@ -6,11 +6,13 @@ from pydantic import BaseModel, ConfigDict
 
 from .linescan import MotionResult
 from .panel_axis import PanelAxisResult
+from .spin_rate import SpinResult
 
 # Kind name -> result model (one line per kind, as in the service's registry).
 RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
     "panel-axis": PanelAxisResult,
+    "spin-from-images": SpinResult,
 }
 
 
@@ -24,4 +26,4 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "MotionResult", "PanelAxisResult", "UnknownResult", "result_model"]
+__all__ = ["RESULT_MODELS", "MotionResult", "PanelAxisResult", "SpinResult", "UnknownResult", "result_model"]

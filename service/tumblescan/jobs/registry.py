@@ -19,10 +19,12 @@ def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
     from .kinds.linescan import LinescanMotion
     from .kinds.panel_axis import PanelAxis
+    from .kinds.spin_rate import SpinFromImages
 
     listed: list[JobKind] = [
         LinescanMotion(),
         PanelAxis(),
+        SpinFromImages(),
     ]
     return {k.name: k for k in listed}
 

@@ -1,0 +1,104 @@
+"""The HTML report: a frame strip with the tracked lines drawn, the fitted rotation angle against
+time with residuals, the spin axis drawn on the first frame, and the numbers with their σ."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..report import figure_html, image_html, page, table_html
+from .estimate import Sequence
+
+LINE_BGR = (60, 200, 60)
+AXIS_BGR = (40, 40, 230)
+MIRROR_BGR = (230, 160, 40)
+
+
+def _frame_bgr(gray: np.ndarray) -> np.ndarray:
+    import cv2
+
+    lo, hi = float(np.percentile(gray, 1)), float(np.percentile(gray, 99.9))
+    g8 = np.clip((gray - lo) * 255.0 / max(hi - lo, 1e-9), 0, 255).astype(np.uint8)
+    return np.asarray(cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR))
+
+
+def strip_png(seq: Sequence, result: dict[str, Any], n: int = 6) -> bytes:
+    """Up to ``n`` frames side by side (scaled to 200 px) with their tracked lines in green."""
+    import cv2
+
+    tracks = result.get("tracks") or []
+    idx = np.unique(np.linspace(0, len(seq.grays) - 1, n).round().astype(int))
+    tiles = []
+    for k in idx:
+        img = _frame_bgr(seq.grays[k])
+        for ob in tracks:
+            if ob["frame"] == k:
+                (x1, y1), (x2, y2) = ob["ends_px"]
+                cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), LINE_BGR, 1, cv2.LINE_AA)
+        s = 200.0 / img.shape[1]
+        tiles.append(cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA))
+    return bytes(cv2.imencode(".png", np.hstack(tiles))[1].tobytes())
+
+
+def axis_png(seq: Sequence, result: dict[str, Any]) -> bytes:
+    """The first frame with the spin axis (red, arrow along the spin vector) and its mirror twin (orange)."""
+    import cv2
+
+    img = _frame_bgr(seq.grays[0])
+    spin = result["spin"]
+    frame0 = result["frames"][0]
+    centre = frame0.get("centroid_px") or [img.shape[1] / 2, img.shape[0] / 2]
+    half = 0.3 * img.shape[1]
+    axes = [(spin.get("axis_camera"), AXIS_BGR)] + [(c["axis_camera"], MIRROR_BGR) for c in spin.get("axis_candidates", [])]
+    for axis, colour in axes:
+        if axis is None:
+            continue
+        a = np.asarray(axis, dtype=float)
+        d = a[:2] / max(float(np.linalg.norm(a[:2])), 1e-9) * half * float(np.linalg.norm(a[:2]))
+        p0 = (int(centre[0] - d[0]), int(centre[1] - d[1]))
+        p1 = (int(centre[0] + d[0]), int(centre[1] + d[1]))
+        cv2.arrowedLine(img, p0, p1, colour, 2, cv2.LINE_AA, tipLength=0.08)
+    return bytes(cv2.imencode(".png", img)[1].tobytes())
+
+
+def angle_figure(seq: Sequence, result: dict[str, Any]) -> str:
+    """The fitted rotation angle ω (t - t_ref) at each frame, and each frame's residual rms."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    t = np.asarray(seq.t_s)
+    spin = result["spin"]
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, subplot_titles=("rotation angle (deg)", "residual rms (px)"))
+    ang = spin["rate_deg_s"] * (t - spin["reference_time_s"])
+    fig.add_trace(go.Scatter(x=t, y=ang, mode="lines+markers", name="fitted angle"), row=1, col=1)
+    rms = [f.get("rms_px") for f in result["frames"]]
+    fig.add_trace(go.Scatter(x=t, y=rms, mode="markers", name="residual rms"), row=2, col=1)
+    fig.update_xaxes(title_text="t (s)", row=2, col=1)
+    fig.update_layout(height=500, showlegend=False)
+    return figure_html(fig, "angle")
+
+
+def build_report(seq: Sequence, result: dict[str, Any]) -> str:
+    s, q = result["spin"], result["quality"]
+    rows = [
+        ("spinning", s["spinning"]),
+        ("rate (deg/s)", f"{s['rate_deg_s']} ± {s['sigma_rate_deg_s']}"),
+        ("period (s)", f"{s['period_s']} ± {s['sigma_period_s']}"),
+        ("axis (camera)", s["axis_camera"]),
+        ("axis σ (deg)", s["sigma_axis_deg"]),
+        ("axis from the line of sight (deg)", s["axis_los_angle_deg"]),
+        ("sense about the line of sight", s["sense_about_los"]),
+        ("mirror twin", s["axis_candidates"][0]["axis_camera"] if s["axis_candidates"] else None),
+        ("tracks / observations", f"{q['line_tracks']} / {q['observations']}"),
+        ("fit rms (px)", q["fit_rms_px"]),
+        ("revolutions covered", q["revolutions_covered"]),
+        ("flags", ", ".join(q["flags"]) or "none"),
+    ]
+    sections = [
+        "<h2>Spin</h2>" + table_html(["quantity", "value"], rows),
+        "<h2>Frames and tracked lines</h2>" + image_html(strip_png(seq, result), "tracked lines (green)"),
+        "<h2>Spin axis on the first frame</h2>" + image_html(axis_png(seq, result), "axis red (arrow: spin vector), mirror twin orange"),
+        "<h2>Fitted angle and residuals</h2>" + angle_figure(seq, result),
+    ]
+    return page("spin-from-images", sections)
