@@ -18,11 +18,16 @@ def paper_fit(seq, feats, tracks, obs, flags, clock, max_rate_deg_s: float) -> S
 
     found = [k for k, tg in enumerate(feats.targets) if tg.found]
     through = [tr for tr in tracks if all(k in tr.members for k in found)]
-    if not through:
-        raise TooFewFeaturesError("frames: no line is matched through the whole sequence (the paper's method needs one)",
-                                  field="frames")  # fmt: skip
+    warnings = []
+    if not through:  # no line through the whole sequence: the mean of whatever is tracked in each frame
+        through = tracks
+        warnings.append("no line is matched through every frame: the mean point jumps as lines come and go")
+    found = [k for k in found if any(k in tr.members for tr in through)]
+    if len(found) < 6:
+        raise TooFewFeaturesError("frames: tracked lines in under 6 frames (the paper's sine fit needs them)", field="frames")
     t = seq.t_s[found]
-    pts = np.array([np.mean([feats.segments[k].ends_px[tr.members[k]] for tr in through], axis=(0, 1)) for k in found])
+    pts = np.array([np.mean([feats.segments[k].ends_px[tr.members[k]] for tr in through if k in tr.members], axis=(0, 1))
+                    for k in found])  # fmt: skip
     span = float(t[-1] - t[0])
     omegas = np.arange(np.radians(0.5) , np.radians(max_rate_deg_s), np.radians(5.0) / span)
     best = None
@@ -66,7 +71,7 @@ def paper_fit(seq, feats, tracks, obs, flags, clock, max_rate_deg_s: float) -> S
                         lines=len(feats.segments[k]), tracked=len(through) if k in found else 0, rms_px=None)
               for k, tg in enumerate(feats.targets)]  # fmt: skip
     clock["fit"] = time.perf_counter()
-    return SpinResult(method="paper", spin=spin, quality=quality, frames=frames,
+    return SpinResult(method="paper", spin=spin, quality=quality, frames=frames, warnings=warnings,
                       timings_ms={"total": round(1000 * (clock["fit"] - clock["start"]), 1)})  # fmt: skip
 
 
