@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -25,7 +26,10 @@ def test_rate_sense_and_axis_near_the_line_of_sight(los_seq: Path) -> None:
     assert s.sense_about_los == truth["sense_about_los"]
     assert s.axis_camera is not None
     a_true = np.array(truth["axis_camera"])
-    off = min(angle_between_deg(np.array(s.axis_camera), a_true), angle_between_deg(np.array(s.axis_camera), mirror_twin(a_true)))
+    off = min(
+        angle_between_deg(np.array(s.axis_camera), a_true),
+        angle_between_deg(np.array(s.axis_camera), mirror_twin(a_true)),
+    )
     assert off < 5.0
     assert result.quality.model == "rigid" and result.quality.line_tracks >= 2
     assert len(result.frames) == len(truth["corners_visible"])
@@ -62,5 +66,5 @@ def test_the_simulator_puts_the_axis_where_asked(geometry: str) -> None:
     lo, hi = AXIS_LOS_DEG[geometry]
     assert lo <= seq.truth["axis_los_angle_deg"] <= hi
     t = [f["t_s"] for f in seq.meta["frames"]]
-    assert all(b > a for a, b in zip(t, t[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(t))
     assert seq.truth["sigma_rate_crb_deg_s"] > 0

@@ -44,7 +44,7 @@ def test_upload_runs_to_a_result_near_the_truth(http: httpx.Client, los_seq: Pat
     assert done["status"] == "succeeded", done
     result = result_model("spin-from-images").model_validate(done["result"])
     truth = json.loads((los_seq / "truth.json").read_text())
-    assert abs(result.spin.rate_deg_s - truth["rate_deg_s"]) <= 4 * result.spin.sigma_rate_deg_s + 0.002  # type: ignore[attr-defined]
+    assert abs(result.spin.rate_deg_s - truth["rate_deg_s"]) <= 4 * result.spin.sigma_rate_deg_s + 0.002
     strip = http.get(f"/v1/jobs/{done['id']}/artifacts/strip")
     assert strip.status_code == 200 and strip.content[:8] == b"\x89PNG\r\n\x1a\n"
     report = http.get(f"/v1/jobs/{done['id']}/artifacts/report")

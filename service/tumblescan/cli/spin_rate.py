@@ -12,7 +12,9 @@ import typer
 from .common import input_errors, json_stdout
 
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, help="spin-from-images: spin rate and axis from a monocular image sequence."
+    add_completion=False,
+    no_args_is_help=True,
+    help="spin-from-images: spin rate and axis from a monocular image sequence.",
 )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass
 
@@ -40,7 +41,9 @@ class Sequence:
     meta: SpinInput
 
 
-def estimate_spin(seq: Sequence, options: EstimateOptions | None = None, progress: Progress = no_progress) -> SpinResult:
+def estimate_spin(
+    seq: Sequence, options: EstimateOptions | None = None, progress: Progress = no_progress
+) -> SpinResult:
     """The recipe: refuse aliasing priors, find the target and its straight edges, track them,
     then fit one rotation to every track (or the paper's sine fit)."""
     opts = options or EstimateOptions()
@@ -100,7 +103,7 @@ def estimate_spin(seq: Sequence, options: EstimateOptions | None = None, progres
         fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0])
         obs = obs2
     if not np.isfinite(fit.sigma_omega_rad_s) or not np.isfinite(fit.omega_rad_s):
-        raise NotConvergedError("frames: the rigid fit did not converge (σ not finite)", field="frames")
+        raise NotConvergedError("frames: the rigid fit did not converge (sigma not finite)", field="frames")
     # 7. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
     twin = fit_rigid(obs, fit.omega_rad_s, mirror_twin(fit.axis), fit.c0, t[0])
     s2 = max(fit.rms_px**2, 1e-6)
@@ -111,7 +114,7 @@ def estimate_spin(seq: Sequence, options: EstimateOptions | None = None, progres
     return _result(seq, feats, obs, fit, twin if ambiguous else None, coarse, flags, clock)
 
 
-def _observations(seq: Sequence, feats: Features, tracks: list) -> Observations:  # type: ignore[type-arg]
+def _observations(seq: Sequence, feats: Features, tracks: list) -> Observations:
     cam = seq.meta.pinhole
     trk, tt, ends, frames = [], [], [], []
     for j, tr in enumerate(tracks):
@@ -171,7 +174,7 @@ def _search(
     C = scan_cost(sub, omegas, axes, c0, t_ref, radius)
     progress("scan", 0.7)
     per_omega = C.min(axis=1)
-    starts = []
+    starts: list[tuple[int, int]] = []
     order = np.argsort(per_omega)
     for k in order:
         if all(abs(k - s) > 2 for s, _ in starts):
@@ -208,7 +211,9 @@ def _rematch(seq: Sequence, feats: Features, fit: RigidFit, obs: Observations) -
     direction within ``REMATCH_DEG``): bridges missed frames and joins broken tracks."""
     cam = seq.meta.pinhole
     t_ref = float(seq.t_s[0])
-    inlier_tracks = [j for j in range(obs.n_tracks) if np.median(np.abs(fit.residuals_px.reshape(-1, 2)[obs.track == j])) < 1.0]
+    inlier_tracks = [
+        j for j in range(obs.n_tracks) if np.median(np.abs(fit.residuals_px.reshape(-1, 2)[obs.track == j])) < 1.0
+    ]
     if len(inlier_tracks) < 2:
         return None
     trk, tt, ends = [], [], []
@@ -282,7 +287,7 @@ def _timings(clock: dict[str, float]) -> dict[str, float]:
     end = time.perf_counter()
     keys = list(clock)
     out = {}
-    for a, b in zip(keys[:-1], keys[1:], strict=True):
+    for a, b in itertools.pairwise(keys):
         out[b] = round(1000 * (clock[b] - clock[a]), 1)
     out["total"] = round(1000 * (end - clock["start"]), 1)
     return out
@@ -317,7 +322,7 @@ def _result(
         spinning=spinning, rate_deg_s=round(rate, 6), sigma_rate_deg_s=round(sigma, 6),
         rate_rad_s=round(fit.omega_rad_s, 8), period_s=None if period is None else round(period, 6),
         sigma_period_s=None if period is None else round(period * sigma / rate, 6),
-        sense_about_los=sense if spinning else None,  # type: ignore[arg-type]
+        sense_about_los=sense if spinning else None,
         axis_camera=[round(float(x), 6) for x in a] if spinning else None,
         sigma_axis_deg=round(sig_axis, 4) if spinning else None, axis_ambiguous=twin is not None,
         axis_candidates=[] if twin is None else [AxisCandidate(axis_camera=[round(float(x), 6) for x in twin.axis],
@@ -330,7 +335,7 @@ def _result(
     quality = Quality(
         frames_used=len(seq.t_s), frames_with_target=n_found, line_tracks=obs.n_tracks,
         observations=len(obs.track), fit_rms_px=round(fit.rms_px, 4), revolutions_covered=round(revs, 4),
-        step_deg_median=round(step, 4), nyquist_rate_deg_s=round(nyq, 4), model="rigid", flags=flags,  # type: ignore[arg-type]
+        step_deg_median=round(step, 4), nyquist_rate_deg_s=round(nyq, 4), model="rigid", flags=flags,
     )  # fmt: skip
     tracks = _tracks_out(seq, obs, fit.residuals_px) if seq.meta.options.return_tracks else None
     return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, fit.residuals_px),
@@ -355,6 +360,8 @@ def _static_result(
     quality = Quality(
         frames_used=len(seq.t_s), frames_with_target=n_found, line_tracks=obs.n_tracks, observations=len(obs.track),
         fit_rms_px=round(motion_px, 4), revolutions_covered=0.0, step_deg_median=0.0, nyquist_rate_deg_s=round(nyq, 4),
-        model="static", flags=flags,  # type: ignore[arg-type]
+        model="static", flags=flags,
     )  # fmt: skip
-    return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, None), timings_ms=_timings(clock))
+    return SpinResult(
+        spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, None), timings_ms=_timings(clock)
+    )

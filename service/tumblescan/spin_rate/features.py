@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,8 +39,8 @@ def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress:
         progress("lines", 0.1 + 0.3 * k / len(grays))
     pairs: dict[tuple[int, int], list[tuple[int, int]]] = {}
     rotation: dict[tuple[int, int], float] = {}
-    for n, (k, l_) in enumerate(zip(found[:-1], found[1:], strict=True)):
-        A, ang = predict_affine(grays[k], grays[l_], targets[k], targets[l_])
+    for n, (k, l_) in enumerate(itertools.pairwise(found)):
+        A, _ang = predict_affine(grays[k], grays[l_], targets[k], targets[l_])
         pairs[(k, l_)] = match(segments[k].ends_px, segments[l_].ends_px, A)
         rotation[(k, l_)] = float(np.degrees(np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])))
         progress("tracking", 0.4 + 0.2 * n / max(len(found) - 1, 1))

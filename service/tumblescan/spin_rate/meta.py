@@ -139,7 +139,9 @@ def _check(meta: SpinInput) -> None:
         raise InputError("frames: a file is named twice", field="frames")
     for i, name in enumerate(names):
         if Path(name).is_absolute() or ".." in Path(name).parts or "\\" in name:
-            raise InputError(f"frames.{i}.file: {name!r} must be a relative path inside the input", field=f"frames.{i}.file")
+            raise InputError(
+                f"frames.{i}.file: {name!r} must be a relative path inside the input", field=f"frames.{i}.file"
+            )
     c = meta.camera
     if c.width_px * c.height_px > MAX_PIXELS:
         raise InputError(f"camera: {c.width_px}x{c.height_px} px is over the 64 Mpx limit", field="camera.width_px")

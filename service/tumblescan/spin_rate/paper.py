@@ -24,12 +24,15 @@ def paper_fit(seq, feats, tracks, obs, flags, clock, max_rate_deg_s: float) -> S
         warnings.append("no line is matched through every frame: the mean point jumps as lines come and go")
     found = [k for k in found if any(k in tr.members for tr in through)]
     if len(found) < 6:
-        raise TooFewFeaturesError("frames: tracked lines in under 6 frames (the paper's sine fit needs them)", field="frames")
+        raise TooFewFeaturesError(
+            "frames: tracked lines in under 6 frames (the paper's sine fit needs them)", field="frames"
+        )
     t = seq.t_s[found]
-    pts = np.array([np.mean([feats.segments[k].ends_px[tr.members[k]] for tr in through if k in tr.members], axis=(0, 1))
+    ends = feats.segments
+    pts = np.array([np.mean([ends[k].ends_px[tr.members[k]] for tr in through if k in tr.members], axis=(0, 1))
                     for k in found])  # fmt: skip
     span = float(t[-1] - t[0])
-    omegas = np.arange(np.radians(0.5) , np.radians(max_rate_deg_s), np.radians(5.0) / span)
+    omegas = np.arange(np.radians(0.5), np.radians(max_rate_deg_s), np.radians(5.0) / span)
     best = None
     for comp in (0, 1):
         y = pts[:, comp]
@@ -51,19 +54,21 @@ def paper_fit(seq, feats, tracks, obs, flags, clock, max_rate_deg_s: float) -> S
             best = (float(res.x[1]), sig, float(np.sqrt(2 * res.cost / len(t))))
     assert best is not None
     if not np.isfinite(best[1]):
-        raise NotConvergedError("frames: the sine fit did not converge (σ not finite)", field="frames")
+        raise NotConvergedError("frames: the sine fit did not converge (sigma not finite)", field="frames")
     rate = float(np.degrees(abs(best[0])))
     sigma = float(np.degrees(best[1]))
     dt_med = float(np.median(np.diff(seq.t_s)))
     spin = Spin(
         spinning=True, rate_deg_s=round(rate, 6), sigma_rate_deg_s=round(sigma, 6), rate_rad_s=round(abs(best[0]), 8),
-        period_s=round(360 / rate, 6) if rate > 0 else None, sigma_period_s=round(360 / rate * sigma / rate, 6) if rate > 0 else None,
+        period_s=round(360 / rate, 6) if rate > 0 else None,
+        sigma_period_s=round(360 / rate * sigma / rate, 6) if rate > 0 else None,
         sense_about_los=None, axis_camera=None, sigma_axis_deg=None, axis_ambiguous=False, axis_candidates=[],
         axis_los_angle_deg=None, projected_axis_angle_deg=None, reference_time_s=float(seq.t_s[0]),
     )  # fmt: skip
     quality = Quality(
         frames_used=len(seq.t_s), frames_with_target=len(found), line_tracks=len(through), observations=len(found),
-        fit_rms_px=round(best[2], 4), revolutions_covered=round(rate * span / 360, 4), step_deg_median=round(rate * dt_med, 4),
+        fit_rms_px=round(best[2], 4), revolutions_covered=round(rate * span / 360, 4),
+        step_deg_median=round(rate * dt_med, 4),
         nyquist_rate_deg_s=round(180 / dt_med, 4), model="paper", flags=flags,
     )  # fmt: skip
     frames = [FrameInfo(index=k, t_s=float(seq.t_s[k]), target_found=tg.found, target_area_px=tg.area_px,

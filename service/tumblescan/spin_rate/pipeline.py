@@ -37,7 +37,8 @@ def load_input(meta_path: Path, frame_files: dict[str, Path] | None = None) -> S
         h, w = gray.shape
         if (w, h) != (meta.camera.width_px, meta.camera.height_px):
             raise InputError(
-                f"camera.width_px: {fr.file} is {w}x{h} px, meta.json says {meta.camera.width_px}x{meta.camera.height_px}",
+                f"camera.width_px: {fr.file} is {w}x{h} px, "
+                f"meta.json says {meta.camera.width_px}x{meta.camera.height_px}",
                 field="camera.width_px",
             )
         full = max(full, float(np.iinfo(raw.dtype).max) if np.issubdtype(raw.dtype, np.integer) else 255.0)
@@ -54,7 +55,9 @@ def _frame_path(meta_path: Path, name: str, frame_files: dict[str, Path] | None)
 def _to_gray(raw: np.ndarray, field: str) -> np.ndarray:
     """imaging's to_gray with this kind's 32 px minimum side."""
     if min(raw.shape[:2]) < MIN_SIDE_PX:
-        raise InputError(f"{field}: {raw.shape[1]}x{raw.shape[0]} px is under the {MIN_SIDE_PX} px minimum side", field=field)
+        raise InputError(
+            f"{field}: {raw.shape[1]}x{raw.shape[0]} px is under the {MIN_SIDE_PX} px minimum side", field=field
+        )
     if min(raw.shape[:2]) < 64:  # to_gray's own minimum is 64 px; pad is not wanted, so convert here
         return np.asarray(raw if raw.ndim == 2 else raw[..., 0], dtype=float)
     return to_gray(raw, field=field)
@@ -74,7 +77,9 @@ def unpack_zip(archive: Path, dest: Path, field: str = "archive") -> Path:
         total = sum(i.file_size for i in infos)
         packed = max(sum(i.compress_size for i in infos), 1)
         if total > MAX_ZIP_BYTES or total / packed > MAX_ZIP_RATIO:
-            raise LimitExceededError(f"{field}: {total} bytes unpacked ({total / packed:.0f}x): refused as a zip bomb", field=field)
+            raise LimitExceededError(
+                f"{field}: {total} bytes unpacked ({total / packed:.0f}x): refused as a zip bomb", field=field
+            )
         root = dest.resolve()
         for info in infos:
             name = info.filename

@@ -35,7 +35,7 @@ def strip_png(seq: Sequence, result: dict[str, Any], n: int = 6) -> bytes:
         for ob in tracks:
             if ob["frame"] == k:
                 (x1, y1), (x2, y2) = ob["ends_px"]
-                cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), LINE_BGR, 1, cv2.LINE_AA)
+                cv2.line(img, (round(x1), round(y1)), (round(x2), round(y2)), LINE_BGR, 1, cv2.LINE_AA)
         s = 200.0 / img.shape[1]
         tiles.append(cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA))
     return bytes(cv2.imencode(".png", np.hstack(tiles))[1].tobytes())
@@ -50,7 +50,9 @@ def axis_png(seq: Sequence, result: dict[str, Any]) -> bytes:
     frame0 = result["frames"][0]
     centre = frame0.get("centroid_px") or [img.shape[1] / 2, img.shape[0] / 2]
     half = 0.3 * img.shape[1]
-    axes = [(spin.get("axis_camera"), AXIS_BGR)] + [(c["axis_camera"], MIRROR_BGR) for c in spin.get("axis_candidates", [])]
+    axes = [(spin.get("axis_camera"), AXIS_BGR)] + [
+        (c["axis_camera"], MIRROR_BGR) for c in spin.get("axis_candidates", [])
+    ]
     for axis, colour in axes:
         if axis is None:
             continue
@@ -86,7 +88,7 @@ def build_report(seq: Sequence, result: dict[str, Any]) -> str:
         ("rate (deg/s)", f"{s['rate_deg_s']} ± {s['sigma_rate_deg_s']}"),
         ("period (s)", f"{s['period_s']} ± {s['sigma_period_s']}"),
         ("axis (camera)", s["axis_camera"]),
-        ("axis σ (deg)", s["sigma_axis_deg"]),
+        ("axis sigma (deg)", s["sigma_axis_deg"]),
         ("axis from the line of sight (deg)", s["axis_los_angle_deg"]),
         ("sense about the line of sight", s["sense_about_los"]),
         ("mirror twin", s["axis_candidates"][0]["axis_camera"] if s["axis_candidates"] else None),
@@ -98,7 +100,8 @@ def build_report(seq: Sequence, result: dict[str, Any]) -> str:
     sections = [
         "<h2>Spin</h2>" + table_html(["quantity", "value"], rows),
         "<h2>Frames and tracked lines</h2>" + image_html(strip_png(seq, result), "tracked lines (green)"),
-        "<h2>Spin axis on the first frame</h2>" + image_html(axis_png(seq, result), "axis red (arrow: spin vector), mirror twin orange"),
+        "<h2>Spin axis on the first frame</h2>"
+        + image_html(axis_png(seq, result), "axis red (arrow: spin vector), mirror twin orange"),
         "<h2>Fitted angle and residuals</h2>" + angle_figure(seq, result),
     ]
     return page("spin-from-images", sections)

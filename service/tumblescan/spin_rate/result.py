@@ -29,7 +29,9 @@ class Spin(_Model):
     rate_rad_s: float
     period_s: float | None
     sigma_period_s: float | None
-    sense_about_los: Literal[-1, 1] | None = Field(description="sign(a·z): +1 clockwise as displayed; null near the image plane")
+    sense_about_los: Literal[-1, 1] | None = Field(
+        description="sign(a·z): +1 clockwise as displayed; null near the image plane"
+    )
     axis_camera: list[float] | None
     sigma_axis_deg: float | None
     axis_ambiguous: bool
@@ -72,7 +74,9 @@ class TrackObs(_Model):
 
 
 class SpinResult(_Model):
-    schema_: Literal["tumblescan.spin_from_images.result/1"] = Field(RESULT_SCHEMA, alias="schema")
+    schema_: Literal["tumblescan.spin_from_images.result/1"] = Field(
+        "tumblescan.spin_from_images.result/1", alias="schema"
+    )
     status: Literal["succeeded"] = "succeeded"
     method: Literal["ours", "paper"] = "ours"
     spin: Spin

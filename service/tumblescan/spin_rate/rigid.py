@@ -74,7 +74,12 @@ def fibonacci_sphere(n: int) -> FloatArray:
 
 
 def scan_cost(
-    obs: Observations, omegas: FloatArray, axes: FloatArray, c0: FloatArray, t_ref: float, radius: float,
+    obs: Observations,
+    omegas: FloatArray,
+    axes: FloatArray,
+    c0: FloatArray,
+    t_ref: float,
+    radius: float,
     clip_px: float = 3.0,
 ) -> FloatArray:
     """The scan's cost (len(omegas), len(axes)) in px²: for a trial (ω, a), each track's planes
@@ -112,7 +117,9 @@ def _turn(axes: FloatArray, v: FloatArray, angle: FloatArray) -> FloatArray:
     return np.asarray(v * c + np.cross(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
 
 
-def init_structure(obs: Observations, omega: float, axis: FloatArray, c0: FloatArray, t_ref: float) -> tuple[FloatArray, FloatArray]:
+def init_structure(
+    obs: Observations, omega: float, axis: FloatArray, c0: FloatArray, t_ref: float
+) -> tuple[FloatArray, FloatArray]:
     """Each line's direction ``d`` (smallest eigenvector of its turned-back normals) and point ``p``
     (least squares of ``m_i·p = -n_i·c``, p orthogonal to d)."""
     R_back = rot(axis, -omega * (obs.t_s - t_ref))
@@ -134,7 +141,9 @@ def init_structure(obs: Observations, omega: float, axis: FloatArray, c0: FloatA
 class _Model:
     """Parameter packing and residuals of the rigid model."""
 
-    def __init__(self, obs: Observations, axis0: FloatArray, p0: FloatArray, d0: FloatArray, t_ref: float, drift: bool) -> None:
+    def __init__(
+        self, obs: Observations, axis0: FloatArray, p0: FloatArray, d0: FloatArray, t_ref: float, drift: bool
+    ) -> None:
         self.obs, self.t_ref, self.drift = obs, t_ref, drift
         self.axis0 = axis0
         self.e_axis = tangent_basis(axis0)
@@ -205,7 +214,8 @@ def fit_rigid(
     res = None
     for _ in range(passes + 1):
         sw = np.sqrt(w)
-        res = least_squares(lambda x, sw=sw: sw * model.residuals(x), x0, jac=lambda x, sw=sw: sw[:, None] * _jacobian(model, x),
+        res = least_squares(lambda x, sw=sw: sw * model.residuals(x), x0,
+                            jac=lambda x, sw=sw: sw[:, None] * _jacobian(model, x),
                             method="lm", x_scale="jac", max_nfev=max_nfev)  # fmt: skip
         x0 = res.x
         r = model.residuals(x0)
@@ -223,10 +233,14 @@ def fit_rigid(
     if omega < 0:  # the same motion: spin vector ω·a
         omega, a = -omega, -a
     return RigidFit(
-        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2))), residuals_px=r,
-        weights=w, sigma_omega_rad_s=float(np.sqrt(max(cov[0, 0], 0.0))), cov_axis_rad2=cov[1:3, 1:3],
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=_cauchy_cost(r, scale), residuals_px=r,
+        weights=w, sigma_omega_rad_s=float(np.sqrt(max(cov[0, 0], 0.0))), cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
         rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success),
     )  # fmt: skip
+
+
+def _cauchy_cost(r: FloatArray, scale: float) -> float:
+    return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
 def _jacobian(model: _Model, x: FloatArray) -> FloatArray:

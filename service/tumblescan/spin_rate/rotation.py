@@ -7,7 +7,7 @@ import numpy as np
 from .._typing import FloatArray
 
 
-def rot(axis: FloatArray, angle_rad: FloatArray) -> FloatArray:
+def rot(axis: FloatArray, angle_rad: float | FloatArray) -> FloatArray:
     """Rotation matrices (N, 3, 3) by ``angle_rad`` (N,) about the unit ``axis`` (3,), right-handed."""
     a = np.asarray(axis, dtype=float)
     th = np.atleast_1d(np.asarray(angle_rad, dtype=float))

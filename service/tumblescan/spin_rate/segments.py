@@ -26,7 +26,9 @@ class Segments:
         return len(self.ends_px)
 
 
-def frame_segments(gray: FloatArray, gray8: np.ndarray, target: TargetMask, min_length_px: float = MIN_LENGTH_PX) -> Segments:
+def frame_segments(
+    gray: FloatArray, gray8: np.ndarray, target: TargetMask, min_length_px: float = MIN_LENGTH_PX
+) -> Segments:
     """LSD segments of ``gray8`` whose middle lies on the (dilated) target mask, collinear fragments
     merged, each refitted on ``gray`` (robust line through sub-pixel edge points)."""
     import cv2

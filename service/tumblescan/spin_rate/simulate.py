@@ -247,8 +247,8 @@ def corner_tracks(
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
-        o3d.core.Tensor(target.mesh.vertices_m.astype(np.float32)),
-        o3d.core.Tensor(target.mesh.triangles.astype(np.uint32)),
+        o3d.core.Tensor(target.mesh.vertices_m.astype(np.float32)),  # type: ignore[call-overload]
+        o3d.core.Tensor(target.mesh.triangles.astype(np.uint32)),  # type: ignore[call-overload]
     )
     P = target.corners_m
     uvs, vis = [], []
@@ -261,7 +261,8 @@ def corner_tracks(
         d = P - origin
         dist = np.linalg.norm(d, axis=1)
         rays = np.hstack([np.broadcast_to(origin, d.shape), d / dist[:, None]]).astype(np.float32)
-        t_hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(float)
+        cast = scene.cast_rays(o3d.core.Tensor(rays))  # type: ignore[call-overload]
+        t_hit = cast["t_hit"].numpy().astype(float)
         inside = (uv[:, 0] > 0) & (uv[:, 0] < camera.width_px - 1) & (uv[:, 1] > 0) & (uv[:, 1] < camera.height_px - 1)
         uvs.append(uv)
         vis.append((t_hit >= dist - 0.01) & inside)

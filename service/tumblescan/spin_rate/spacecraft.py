@@ -93,7 +93,7 @@ def _solid(parts: list[Part]) -> Target:
     major = evecs[:, int(np.argmax(evals))]
     meshes, corners = [], []
     for p in parts:
-        m = box(p.center_m - p.R.T @ com, p.size_m, p.albedo, p.R)
+        m = box((p.center_m - p.R.T @ com).tolist(), p.size_m.tolist(), p.albedo, p.R)
         if p.albedo == PANEL_FRONT_ALBEDO:  # the back face (-z of the panel) is brighter
             normals = _face_normals(m)
             back = normals @ (p.R @ np.array([0.0, 0.0, 1.0])) < -0.5

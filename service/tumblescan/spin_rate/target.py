@@ -39,8 +39,7 @@ def find_target(gray: FloatArray, full_scale: float, polarity: str = "bright") -
     sky = float(np.median(img))
     noise = max(1.4826 * float(np.median(np.abs(img - sky))), 1e-6)
     thr = sky + max(SIGMA_THRESHOLD * noise, 0.012 * full_scale)
-    binary = (img > thr).astype(np.uint8)
-    binary = cv2.morphologyEx(binary, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    binary = cv2.morphologyEx((img > thr).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     n, labels, stats, centroids = cv2.connectedComponentsWithStats(binary, connectivity=8)
     if n <= 1:
         return TargetMask(None, 0, None, None, False, False, sky, noise)
@@ -49,7 +48,9 @@ def find_target(gray: FloatArray, full_scale: float, polarity: str = "bright") -
     if area < MIN_TARGET_AREA_PX:
         return TargetMask(None, area, None, None, False, False, sky, noise)
     mask = labels == best
-    x, y, w, h = (int(stats[best, k]) for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT))
+    x, y, w, h = (
+        int(stats[best, k]) for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT)
+    )
     H, W = gray.shape
     border = x == 0 or y == 0 or x + w >= W or y + h >= H
     saturated = bool(np.mean(gray[mask] >= full_scale) > 0.01)

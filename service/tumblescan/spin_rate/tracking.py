@@ -56,13 +56,14 @@ def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: Targ
         if response > best:
             best, best_angle, best_shift = float(response), float(ang), np.array(shift, dtype=float)
     M = cv2.getRotationMatrix2D((float(tp.centroid_px[0] - o[0]), float(tp.centroid_px[1] - o[1])), best_angle, 1.0)
-    M[:, 2] += 2.0 * best_shift
+    M = np.asarray(M, dtype=float)
+    M[:, 2] = M[:, 2] + 2.0 * best_shift
     # Step 2: ECC affine on blurred crops (warp maps next -> prev), seeded with the inverse of M.
     ip = cv2.GaussianBlur(prev[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
     inn = cv2.GaussianBlur(next_[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
     warp = cv2.invertAffineTransform(M).astype(np.float32)
     try:
-        _, warp = cv2.findTransformECC(
+        _, warp = cv2.findTransformECC(  # type: ignore[call-overload]
             inn, ip, warp, cv2.MOTION_AFFINE, (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 60, 1e-5), None, 5
         )
         M = cv2.invertAffineTransform(warp)

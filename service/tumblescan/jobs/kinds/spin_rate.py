@@ -33,7 +33,9 @@ FRAMES_FORM = InputForm(
     options=EstimateOptions,
     parts=(
         InputPart("meta", "meta.json: frames with mid-exposure times, camera, prior", ("json",)),
-        InputPart("frames", "the frames (8/16-bit PNG or TIFF), matched to meta.json by file name", ("png", "tiff"), many=True),
+        InputPart(
+            "frames", "the frames (8/16-bit PNG or TIFF), matched to meta.json by file name", ("png", "tiff"), many=True
+        ),
     ),
 )
 ARCHIVE_FORM = InputForm(
@@ -56,7 +58,9 @@ class SpinFromImages:
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
         if payload is not None:
-            raise InputError("spin-from-images takes an upload (meta + frames, or archive), not a JSON input", field="input")
+            raise InputError(
+                "spin-from-images takes an upload (meta + frames, or archive), not a JSON input", field="input"
+            )
         if "archive" in files:
             return ARCHIVE_FORM
         for part in ("meta", "frames"):
@@ -83,7 +87,9 @@ class SpinFromImages:
         if len(seq.grays) > limits.max_frames:
             raise LimitExceededError(f"frames: {len(seq.grays)} frames (limit {limits.max_frames})", field="frames")
         if seq.grays[0].size > limits.max_pixels:
-            raise LimitExceededError(f"frames: {seq.grays[0].size} px per frame (limit {limits.max_pixels})", field="frames")
+            raise LimitExceededError(
+                f"frames: {seq.grays[0].size} px per frame (limit {limits.max_pixels})", field="frames"
+            )
         out = {"meta": _relative(meta, sub)}
         if sub.form.name == "frames":
             for i, p in enumerate(sub.files["frames"]):
