@@ -25,9 +25,12 @@ TRACKING_MAX_STEP_DEG = 60.0
 STATIC_MOTION_PX = 0.5
 SENSE_MIN_FROM_PLANE_DEG = 15.0
 TWIN_DELTA_CHI2 = 9.0
-SCAN_AXES = 128
-SCAN_TRACKS = 16
+SCAN_AXES = 256
+SCAN_STEP_DEG = 6.0
+SCAN_TRACKS = 12
+SCAN_CLIP_PX = 5.0
 REMATCH_PX = 2.0
+RATE_SIGMA_FLOOR_REL = 0.0015
 REMATCH_DEG = 3.0
 
 
@@ -66,10 +69,10 @@ def estimate_spin(
     feats = extract(seq.grays, seq.full_scale, meta.prior.target_polarity, progress)
     clock["features"] = time.perf_counter()
     tracks = [tr for tr in feats.tracks if len(tr) >= MIN_TRACK_FRAMES]
-    long_tracks = [tr for tr in tracks if max(tr.members) - min(tr.members) + 1 >= LONG_TRACK_FRAMES]
-    if len(long_tracks) < 2:
+    if len(tracks) < 2:
         raise TooFewFeaturesError(
-            f"frames: {len(long_tracks)} line tracks span 6 or more frames (at least 2 are needed)", field="frames"
+            f"frames: {len(tracks)} line tracks of 3 or more frames (at least 2 spanning 6 frames are needed)",
+            field="frames",
         )
     obs = _observations(seq, feats, tracks)
     # 4. Static target: no edge moves above the noise.
@@ -84,17 +87,26 @@ def estimate_spin(
     w_lo = np.radians(max(meta.prior.min_rate_deg_s or 0.0, 0.5 * 360.0 / (t[-1] - t[0]) / 20.0))
     w_hi = np.radians(min(max_rate, TRACKING_MAX_STEP_DEG / dt_med))
     span = float(t[-1] - t[0])
-    omegas = np.arange(w_lo, w_hi, np.radians(9.0) / span)
+    # The frame-to-frame image rotation (clockwise as displayed) bounds the rate when the axis is
+    # off the image plane: ω between 0.6 and 2.5 times it, and its sign is the sense, sign(a·z).
+    img_rate = float(np.median([r / (t[l_] - t[k]) for (k, l_), r in feats.rotation_deg.items()]))
+    sense_hint = 0
+    if abs(img_rate) * dt_med > 3.0:
+        sense_hint = int(np.sign(img_rate))
+        w_lo = max(w_lo, np.radians(0.6 * abs(img_rate)))
+        w_hi = min(w_hi, np.radians(2.5 * abs(img_rate)))
+    omegas = np.arange(w_lo, max(w_hi, w_lo * 1.01), np.radians(SCAN_STEP_DEG) / span)
     found = [k for k, tg in enumerate(feats.targets) if tg.mask is not None]
     psi = np.array([mask_orientation(feats.targets[k].mask) for k in found])  # type: ignore[arg-type]
     coarse = lomb_scargle_rate(t[found], psi, omegas)
     c0 = _centre_guess(seq, feats)
     radius = _radius_guess(seq, feats)
-    starts = _search(obs, omegas, c0, radius, t[0], coarse, progress)
+    starts = _search(obs, omegas, c0, radius, t[0], coarse, sense_hint, progress)
     clock["scan"] = time.perf_counter()
     # 6. Short rigid fits from each start, the best carried on; re-match every frame's segments to
     # its lines and refit.
     trials = [fit_rigid(obs, w0, a0, cc, t[0], max_nfev=25, passes=1) for w0, a0, cc in starts]
+    trials += [fit_rigid(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t[0], max_nfev=25, passes=1) for f in trials]
     best = min(trials, key=lambda f: f.cost)
     fit = fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t[0])
     progress("fit", 0.85)
@@ -102,6 +114,15 @@ def estimate_spin(
     if obs2 is not None:
         fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0])
         obs = obs2
+    # The rule of the contract, on the final tracks: at least 2 spanning 6 or more frames.
+    frame_of = _frame_of(seq, obs)
+    spans = [int(np.ptp(frame_of[obs.track == j])) + 1 for j in range(obs.n_tracks)]
+    if sum(s >= LONG_TRACK_FRAMES for s in spans) < 2:
+        raise TooFewFeaturesError(
+            f"frames: {sum(s >= LONG_TRACK_FRAMES for s in spans)} line tracks span 6 or more frames "
+            "(at least 2 are needed)",
+            field="frames",
+        )
     if not np.isfinite(fit.sigma_omega_rad_s) or not np.isfinite(fit.omega_rad_s):
         raise NotConvergedError("frames: the rigid fit did not converge (sigma not finite)", field="frames")
     # 7. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
@@ -144,9 +165,21 @@ def _track_motion_px(obs: Observations) -> float:
 
 
 def _centre_guess(seq: Sequence, feats: Features) -> FloatArray:
+    """The projected centre of rotation (normalised, z = 1): the median fixed point of the
+    frame-to-frame affines that turn by over 3° (the centroid of an unequal, partly shadowed target
+    is often 10+ px off it), else the mean mask centroid."""
     K = seq.meta.pinhole.K
-    cents = np.array([tg.centroid_px for tg in feats.targets if tg.centroid_px is not None])
-    u, v = cents.mean(axis=0)
+    fixed = []
+    for (k, l_), A in feats.affines.items():
+        if abs(feats.rotation_deg[(k, l_)]) > 3.0:
+            M = A[:, :2] - np.eye(2)
+            if abs(np.linalg.det(M)) > 1e-3:
+                fixed.append(np.linalg.solve(M, -A[:, 2]))
+    if len(fixed) >= 3:
+        u, v = np.median(np.array(fixed), axis=0)
+    else:
+        cents = np.array([tg.centroid_px for tg in feats.targets if tg.centroid_px is not None])
+        u, v = cents.mean(axis=0)
     return np.array([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], 1.0])
 
 
@@ -158,7 +191,7 @@ def _radius_guess(seq: Sequence, feats: Features) -> float:
 
 def _search(
     obs: Observations, omegas: FloatArray, c0: FloatArray, radius: float, t_ref: float, coarse: float | None,
-    progress: Progress,
+    sense_hint: int, progress: Progress,
 ) -> list[tuple[float, FloatArray, FloatArray]]:  # fmt: skip
     """Starts (ω, axis, c0), best first (ω, axis, c0): a scan over rates and axes on the longest tracks, then the best
     few basins (and the periodogram's peak) polished by Nelder-Mead over (ω, axis, c0_xy)."""
@@ -171,7 +204,9 @@ def _search(
     remap[keep] = np.arange(len(keep))
     sub = Observations.build(remap[obs.track[sel]], obs.t_s[sel], obs.ends_px[sel], obs.K)
     axes = fibonacci_sphere(SCAN_AXES)
-    C = scan_cost(sub, omegas, axes, c0, t_ref, radius)
+    if sense_hint:  # the hemisphere the image rotation points to (and a band along the image plane)
+        axes = axes[sense_hint * axes[:, 2] > -0.15]
+    C = scan_cost(sub, omegas, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
     progress("scan", 0.7)
     per_omega = C.min(axis=1)
     starts: list[tuple[int, int]] = []
@@ -190,7 +225,7 @@ def _search(
         a = a0 + np.array([x[1], x[2], x[3]])
         a = a / np.linalg.norm(a)
         c = np.array([c0[0] + x[4], c0[1] + x[5], 1.0])
-        return float(scan_cost(sub, np.array([x[0]]), a[None], c, t_ref, radius)[0, 0])
+        return float(scan_cost(sub, np.array([x[0]]), a[None], c, t_ref, radius, clip_px=SCAN_CLIP_PX)[0, 0])
 
     polished: list[tuple[float, float, FloatArray, FloatArray]] = []
     for w0, a0 in cands:
@@ -304,7 +339,9 @@ def _result(
     flags: list[str], clock: dict[str, float],
 ) -> SpinResult:  # fmt: skip
     rate = float(np.degrees(fit.omega_rad_s))
-    sigma = float(np.degrees(fit.sigma_omega_rad_s))
+    # Edge biases that move with the lighting are not in the residuals; a relative floor, measured
+    # on the simulator benchmark (docs/spin_rate.md), keeps σ from being overconfident.
+    sigma = float(np.hypot(np.degrees(fit.sigma_omega_rad_s), RATE_SIGMA_FLOOR_REL * rate))
     a = fit.axis
     min_rate = seq.meta.prior.min_rate_deg_s
     spinning = not (min_rate is not None and rate < min_rate)

@@ -20,6 +20,7 @@ class Features:
     segments: list[Segments]
     tracks: list[Track]
     rotation_deg: dict[tuple[int, int], float]
+    affines: dict[tuple[int, int], FloatArray]
 
 
 def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress: Progress) -> Features:
@@ -39,9 +40,11 @@ def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress:
         progress("lines", 0.1 + 0.3 * k / len(grays))
     pairs: dict[tuple[int, int], list[tuple[int, int]]] = {}
     rotation: dict[tuple[int, int], float] = {}
+    affines: dict[tuple[int, int], FloatArray] = {}
     for n, (k, l_) in enumerate(itertools.pairwise(found)):
         A, _ang = predict_affine(grays[k], grays[l_], targets[k], targets[l_])
         pairs[(k, l_)] = match(segments[k].ends_px, segments[l_].ends_px, A)
+        affines[(k, l_)] = A
         rotation[(k, l_)] = float(np.degrees(np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])))
         progress("tracking", 0.4 + 0.2 * n / max(len(found) - 1, 1))
-    return Features(targets, segments, build_tracks(segments, pairs), rotation)
+    return Features(targets, segments, build_tracks(segments, pairs), rotation, affines)

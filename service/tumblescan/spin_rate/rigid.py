@@ -81,12 +81,15 @@ def scan_cost(
     t_ref: float,
     radius: float,
     clip_px: float = 3.0,
+    window_deg: float | None = None,
 ) -> FloatArray:
     """The scan's cost (len(omegas), len(axes)) in px²: for a trial (ω, a), each track's planes
     ``(m_i, n_i·c0)`` (the back-projected planes, turned back to the reference frame) must share one
     line; the two smallest eigenvectors of their 4x4 scatter are two homogeneous points on it
     (linear), then each end point's
-    distance to that line re-projected at its time, squared and clipped at ``clip_px``, is summed."""
+    distance to that line re-projected at its time, squared and clipped at ``clip_px``, is summed.
+    With ``window_deg`` only the observations within that much rotation of ``t_ref`` count (the
+    cost per observation, times their total): a short arc has wider basins for the search."""
     starts = np.flatnonzero(np.r_[True, obs.track[1:] != obs.track[:-1]])
     n = obs.normals
     q = n @ c0
@@ -95,8 +98,10 @@ def scan_cost(
     out = np.empty((len(omegas), len(axes)))
     for k, w in enumerate(omegas):
         m = _turn(axes, n[None], -w * dt)  # (A, O, 3)
+        keep = np.ones(len(dt)) if window_deg is None else (w * dt <= np.radians(window_deg)).astype(float)
+        m = m * keep[None, :, None]
         # Conditioning: the structure is within ``radius`` of the centre, so scale X = radius·X'.
-        pi = np.concatenate([m * radius, np.broadcast_to(q[None, :, None], (*m.shape[:2], 1))], axis=2)
+        pi = np.concatenate([m * radius, np.broadcast_to((q * keep)[None, :, None], (*m.shape[:2], 1))], axis=2)
         S = np.add.reduceat(pi[..., :, None] * pi[..., None, :], starts, axis=1)  # (A, T, 4, 4)
         _, V = np.linalg.eigh(S)
         pts = V[..., :2][:, obs.track]  # (A, O, 4, 2): two homogeneous points spanning the line
@@ -105,7 +110,8 @@ def scan_cost(
         line = np.cross(X1 @ obs.K.T, X2 @ obs.K.T)
         line /= np.maximum(np.linalg.norm(line[..., :2], axis=-1, keepdims=True), 1e-12)
         r = np.einsum("oki,aoi->aok", e_h, line)
-        out[k] = np.minimum(r**2, clip_px**2).sum(axis=(1, 2))
+        used = max(float(keep.sum()), 1.0)
+        out[k] = (np.minimum(r**2, clip_px**2) * keep[None, :, None]).sum(axis=(1, 2)) * len(dt) / used
     return out
 
 
@@ -228,7 +234,16 @@ def fit_rigid(
     n_par = J.shape[1]
     s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
     JW = J * np.sqrt(w)[:, None]
-    cov = np.linalg.pinv(JW.T @ JW, rcond=1e-10, hermitian=True) * s2
+    H_inv = np.linalg.pinv(JW.T @ JW, rcond=1e-10, hermitian=True)
+    cov = H_inv * s2
+    # Cluster-robust (sandwich) covariance with one cluster per track: an edge's bias (shading, PSF,
+    # a neighbouring edge) persists from frame to frame, which the independent-noise σ ignores.
+    # The larger of the two is reported.
+    g = np.zeros((obs.n_tracks, n_par))
+    np.add.at(g, np.repeat(obs.track, 2), J * (w * r)[:, None])
+    G = obs.n_tracks
+    cov_cluster = H_inv @ (g.T @ g) @ H_inv * G / max(G - 1, 1)
+    cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov)[:, None], cov_cluster, cov)
     omega, a, c, v, p, d = model.unpack(x0)
     if omega < 0:  # the same motion: spin vector ω·a
         omega, a = -omega, -a
