@@ -31,6 +31,7 @@ SCAN_TRACKS = 12
 SCAN_CLIP_PX = 5.0
 REMATCH_PX = 2.0
 RATE_SIGMA_FLOOR_REL = 0.0015
+REMATCH_ROUNDS = 3
 REMATCH_DEG = 3.0
 
 
@@ -110,8 +111,10 @@ def estimate_spin(
     best = min(trials, key=lambda f: f.cost)
     fit = fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t[0])
     progress("fit", 0.85)
-    obs2 = _rematch(seq, feats, fit, obs)
-    if obs2 is not None:
+    for _ in range(REMATCH_ROUNDS):  # a better model matches more segments, until it stops growing
+        obs2 = _rematch(seq, feats, fit, obs)
+        if obs2 is None or len(obs2.track) < 1.05 * len(obs.track):
+            break
         fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0])
         obs = obs2
     # The rule of the contract, on the final tracks: at least 2 spanning 6 or more frames.
