@@ -23,15 +23,15 @@ class Spin(_Model):
     rate_deg_s: float
     sigma_rate_deg_s: float
     rate_rad_s: float
-    period_s: float | None = None
-    sigma_period_s: float | None = None
-    sense_about_los: Literal[-1, 1] | None = None
-    axis_camera: list[float] | None = None
-    sigma_axis_deg: float | None = None
-    axis_ambiguous: bool = False
-    axis_candidates: list[AxisCandidate] = Field(default_factory=list)
-    axis_los_angle_deg: float | None = None
-    projected_axis_angle_deg: float | None = None
+    period_s: float | None
+    sigma_period_s: float | None
+    sense_about_los: Literal[-1, 1] | None
+    axis_camera: list[float] | None
+    sigma_axis_deg: float | None
+    axis_ambiguous: bool
+    axis_candidates: list[AxisCandidate]
+    axis_los_angle_deg: float | None
+    projected_axis_angle_deg: float | None
     reference_time_s: float
     coarse_rate_deg_s: float | None = None
 
@@ -41,12 +41,12 @@ class Quality(_Model):
     frames_with_target: int
     line_tracks: int
     observations: int
-    fit_rms_px: float | None = None
+    fit_rms_px: float | None
     revolutions_covered: float
     step_deg_median: float
     nyquist_rate_deg_s: float
     model: str
-    flags: list[str] = Field(default_factory=list)
+    flags: list[str]
 
 
 class FrameInfo(_Model):
@@ -54,10 +54,10 @@ class FrameInfo(_Model):
     t_s: float
     target_found: bool
     target_area_px: int
-    centroid_px: list[float] | None = None
+    centroid_px: list[float] | None
     lines: int
     tracked: int
-    rms_px: float | None = None
+    rms_px: float | None
 
 
 class TrackObs(_Model):
