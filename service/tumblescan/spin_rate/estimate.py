@@ -31,6 +31,7 @@ SCAN_TRACKS = 12
 SCAN_CLIP_PX = 5.0
 REMATCH_PX = 2.0
 RATE_SIGMA_FLOOR_REL = 0.0015
+IMG_RATE_MAX_FACTOR = 2.5
 REMATCH_ROUNDS = 3
 REMATCH_DEG = 3.0
 
@@ -95,7 +96,7 @@ def estimate_spin(
     if abs(img_rate) * dt_med > 3.0:
         sense_hint = int(np.sign(img_rate))
         w_lo = max(w_lo, np.radians(0.6 * abs(img_rate)))
-        w_hi = min(w_hi, np.radians(2.5 * abs(img_rate)))
+        w_hi = min(w_hi, np.radians(IMG_RATE_MAX_FACTOR * abs(img_rate)))
     omegas = np.arange(w_lo, max(w_hi, w_lo * 1.01), np.radians(SCAN_STEP_DEG) / span)
     found = [k for k, tg in enumerate(feats.targets) if tg.mask is not None]
     psi = np.array([mask_orientation(feats.targets[k].mask) for k in found])  # type: ignore[arg-type]
