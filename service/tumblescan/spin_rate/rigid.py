@@ -182,17 +182,6 @@ class _Model:
         line = line / np.linalg.norm(line[:, :2], axis=1, keepdims=True)
         return np.asarray(np.einsum("oki,oi->ok", self.e_h, line).ravel(), dtype=float)
 
-    def sparsity(self) -> object:
-        from scipy.sparse import lil_matrix
-
-        o = self.obs
-        n = self.n_global + 4 * o.n_tracks
-        S = lil_matrix((2 * len(o.track), n), dtype=int)
-        S[:, : self.n_global] = 1
-        for k, j in enumerate(o.track):
-            S[2 * k : 2 * k + 2, self.n_global + 4 * j : self.n_global + 4 * j + 4] = 1
-        return S
-
 
 def fit_rigid(
     obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float, *, drift: bool = False,
