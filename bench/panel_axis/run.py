@@ -135,6 +135,7 @@ def ground_rows(cases: list[dict[str, Any]]) -> list[list[str]]:
             [
                 method,
                 f"{amb}/{n}",
+                f"{len(best)}/{n}" if method == "ours" else "-",
                 f"{_q(best, 50):.2f} / {max(best):.2f} ({len(best)})" if best else "-",
                 f"{_q(twin, 50):.1f}" if twin else "-",
                 f"{_q(err, 50):.1f} / {max(err):.1f}" if err else "-",
@@ -205,7 +206,7 @@ def main() -> None:
         "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n)", "ms/image",
     ]  # fmt: skip
     ground_header = [
-        "pipeline", "ambiguous", "best candidate median / max (deg)", "twin median", "axis error median / max",
+        "pipeline", "ambiguous", "with candidates", "best candidate median / max (deg)", "twin median", "axis error median / max",
         "closest candidate to the line of sight (deg)", "image angle err, no prior, median / max", "ms/image",
     ]  # fmt: skip
     text = "\n\n".join(

@@ -29,11 +29,12 @@ from .options import EstimateOptions
 from .paper import estimate_paper
 from .result import Axis, Candidate, Direction, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
-from .weak import ippe_candidates, wing_corners
+from .weak import best_wing, ippe_candidates, wing_corners
 
 MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
 MIN_TIP_WIDTH_PX = 4.0  # under it the panel is seen edge-on
 MIN_AXIS_EXTENT_PX = 30.0
+MAX_CORNER_FIT_PX = 1.0  # IPPE reprojection rms over which the wing's corners are doubtful
 ELONGATION_ALIGN_DEG = 20.0
 
 
@@ -109,7 +110,7 @@ def estimate_axis(
     corners = None
     if weak:
         warnings.append("weak_perspective")
-        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options)
+        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options, warnings)
     else:
         axis = frames.axis(fit.direction, fit.cov_tangent_rad2, fit.basis)
     image_angle = float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0)
@@ -305,6 +306,7 @@ def _weak_answer(
     frames: _Frames,
     rng: np.random.Generator,
     options: EstimateOptions,
+    warnings: list[str],
 ) -> tuple[Axis | None, list[Candidate], FloatArray | None]:
     """Weak perspective: the IPPE pair with the prior, else no axis (or a refusal)."""
     if not meta.prior_complete:
@@ -316,13 +318,21 @@ def _weak_answer(
             )
         return None, [], None
     assert meta.prior is not None and meta.prior.panel_length_m is not None and meta.prior.panel_width_m is not None
-    found = wing_corners(family, edges)
+    L, W = meta.prior.panel_length_m, meta.prior.panel_width_m
+    found = best_wing(wing_corners(family, edges), L, W, camera, meta.prior.range_m)
     if found is None:
         if options.require_axis:
-            raise DepthUnobservableError("image: weak perspective and no wing's four corners were found", field="image")
+            raise DepthUnobservableError(
+                "image: weak perspective and no wing's four corners fit the panel prior", field="image"
+            )
+        warnings.append("wing_corners_not_found")
         return None, [], None
-    corners, sigma_px = found
-    poses = ippe_candidates(corners, meta.prior.panel_length_m, meta.prior.panel_width_m, camera, sigma_px, rng)
+    corners, sigma_px, fit_px = found
+    if fit_px > MAX_CORNER_FIT_PX:
+        warnings.append("wing_corners_misfit")
+    # A rectangle that fits the corners worse than their noise says the corners are off by about
+    # that much: the Monte Carlo uses the larger of the two.
+    poses = ippe_candidates(corners, L, W, camera, max(sigma_px, fit_px), rng)
     if not poses:
         return None, [], corners
     cands = []
