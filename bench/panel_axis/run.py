@@ -62,7 +62,12 @@ def run_one(view: SimulatedView, method: str, *, drop_prior: bool = False) -> di
         return {"refused": exc.code, "ms": 1000 * (time.perf_counter() - t0)}
     ms = 1000 * (time.perf_counter() - t0)
     truth = view.truth
-    out: dict[str, Any] = {"ms": ms, "ambiguous": r.ambiguous, "orth": r.panel.orthogonality_deg}
+    out: dict[str, Any] = {
+        "ms": ms,
+        "ambiguous": r.ambiguous,
+        "orth": r.panel.orthogonality_deg,
+        "orth_sigma": r.panel.orthogonality_sigma_deg,
+    }
     if r.axis is not None:
         out["err"] = _angle_deg(r.axis.camera, truth["axis_camera"])
         out["sigma"] = r.axis.sigma_deg
@@ -115,7 +120,9 @@ def near_rows(cases: list[dict[str, Any]], noisy: bool) -> list[list[str]]:
         else:
             row += ["-", "-"]
         orth = [r["orth"] for r, _ in ok if r.get("orth") is not None]
-        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)})", f"{_q([r['ms'] for r in res], 50):.0f}"]
+        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)})"]
+        oz = [r["orth"] / r["orth_sigma"] for r, _ in ok if r.get("orth") is not None and r.get("orth_sigma")]
+        row += [f"{_q(oz, 50):.2f} / {_q(oz, 90):.2f}" if oz else "-", f"{_q([r['ms'] for r in res], 50):.0f}"]
         rows.append(row)
     return rows
 
@@ -203,11 +210,11 @@ def main() -> None:
         )  # fmt: skip
     near_header = [
         "pipeline", "answered", "median (deg)", "p90", "max", "within max(thr, 3sigma_CRLB)",
-        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n)", "ms/image",
+        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n)", "orth / its sigma median / p90", "ms/image",
     ]  # fmt: skip
     ground_header = [
-        "pipeline", "ambiguous", "with candidates", "best candidate median / max (deg)", "twin median", "axis error median / max",
-        "closest candidate to the line of sight (deg)", "image angle err, no prior, median / max", "ms/image",
+        "pipeline", "ambiguous", "with candidates", "best candidate median / max (deg)", "twin median",
+        "axis error median / max", "closest candidate to the line of sight (deg)", "image angle err, no prior, median / max", "ms/image",
     ]  # fmt: skip
     text = "\n\n".join(
         [

@@ -372,6 +372,10 @@ def _panel(
         panel.short_axis = frames.direction(short_fit.direction)
         panel.normal = frames.direction(np.cross(fit.direction, short_fit.direction))
         panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short_fit.direction))
+        # σ of d·d_short from both fits' covariances (the angle moves by that much in radians).
+        g1, g2 = fit.basis @ short_fit.direction, short_fit.basis @ fit.direction
+        var = float(g1 @ fit.cov_tangent_rad2 @ g1 + g2 @ short_fit.cov_tangent_rad2 @ g2)
+        panel.orthogonality_sigma_deg = float(np.degrees(np.sqrt(max(var, 0.0))))
         panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
         panel.short_edges = len(short_family.edges)
     return panel
