@@ -214,7 +214,8 @@ def main() -> None:
     ]  # fmt: skip
     ground_header = [
         "pipeline", "ambiguous", "with candidates", "best candidate median / max (deg)", "twin median",
-        "axis error median / max", "closest candidate to the line of sight (deg)", "image angle err, no prior, median / max", "ms/image",
+        "axis error median / max", "closest candidate to the line of sight (deg)",
+        "image angle err, no prior, median / max", "ms/image",
     ]  # fmt: skip
     text = "\n\n".join(
         [
