@@ -97,8 +97,11 @@ class _Stack:
         return np.maximum((self.D_off @ d) ** 2 * self.v_off + (self.D_ang @ d) ** 2 * self.v_ang, 1e-30)
 
 
-def fit_direction(planes: list[PlaneObs], *, robust: bool = True, iterations: int = 10) -> DirectionFit:
-    """The common direction of the planes' lines (see the module docstring); needs 2 planes or more."""
+def fit_direction(
+    planes: list[PlaneObs], *, robust: bool = True, iterations: int = 10, reject: bool = False
+) -> DirectionFit:
+    """The common direction of the planes' lines (see the module docstring); needs 2 planes or more.
+    With ``reject``, planes over 5σ after the fit are dropped and the fit redone (kept when 3 remain)."""
     st = _Stack(planes)
     N = st.N
     d = np.linalg.svd(N)[2][-1]
@@ -118,6 +121,13 @@ def fit_direction(planes: list[PlaneObs], *, robust: bool = True, iterations: in
             break
     s2 = st.sigma2(d)
     r = N @ d / np.sqrt(s2)
+    if reject and np.count_nonzero(np.abs(r) <= REJECT_K) >= 3 and np.any(np.abs(r) > REJECT_K):
+        w = np.where(np.abs(r) > REJECT_K, 0.0, w)
+        for _ in range(iterations):
+            M = (N * (w / s2)[:, None]).T @ N
+            d = np.linalg.eigh(M)[1][:, 0]
+            s2 = st.sigma2(d)
+        r = N @ d / np.sqrt(s2)
     M = (N * (w / s2)[:, None]).T @ N
     evals, evecs = np.linalg.eigh(M)
     d = evecs[:, 0]

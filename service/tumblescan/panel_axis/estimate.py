@@ -231,7 +231,8 @@ def _extent(family: Family) -> float:
 def _short_family(
     families: list[Family], axis_family: Family, d: FloatArray
 ) -> tuple[Family | None, DirectionFit | None]:
-    """The family within 10° of orthogonal to the axis with the most edge length."""
+    """The family within 10° of orthogonal to the axis with the most edge length (the wing ends
+    and sub-panel gaps, usually), fitted with edges over 5σ dropped."""
     best = None
     for fam in families:
         if fam is axis_family or len(fam.edges) < 2:
@@ -242,7 +243,7 @@ def _short_family(
             best = fam
     if best is None:
         return None, None
-    return best, fit_direction([e.plane for e in best.edges])
+    return best, fit_direction([e.plane for e in best.edges], reject=True)
 
 
 def _orthogonal_families(
