@@ -30,6 +30,7 @@ bench: install
 	$(BIN)/python -m bench.linescan.accuracy
 	$(BIN)/python -m bench.linescan.solvers
 	$(BIN)/python -m bench.linescan.speed
+	$(BIN)/python -m bench.panel_axis.run
 	$(BIN)/python -m bench.service.round_trip
 	$(BIN)/python -m bench.service.startup
 

@@ -229,6 +229,10 @@ def main() -> None:
             markdown(ground_header, ground_rows(ground)),
         ]
     )
+    import resource
+
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    text += f"\n\nPeak memory of the benchmark process (renders included): {peak_mb:.0f} MB"
     print(text)
     (OUT / "table.md").write_text(text + "\n")
     (OUT / "cases.json").write_text(json.dumps({"near": near, "ground": ground}, indent=1))
