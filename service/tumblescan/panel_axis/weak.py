@@ -128,7 +128,8 @@ def ippe_candidates(
 
 def _solve(
     corners: FloatArray, L: float, W: float, camera: PinholeCamera
-) -> list[tuple[FloatArray, FloatArray, float]]:
+) -> list[tuple[FloatArray, FloatArray, float, float]]:
+    """IPPE's poses: (axis, normal, reprojection rms px, depth m) each."""
     import cv2
 
     obj = np.array([[0, 0, 0], [L, 0, 0], [L, W, 0], [0, W, 0]], dtype=np.float64)
