@@ -192,7 +192,7 @@ def main() -> None:
 
     cv2.setNumThreads(1)
     ap = argparse.ArgumentParser()
-    ap.add_argument("--near", type=int, default=50)
+    ap.add_argument("--near", type=int, default=75)
     ap.add_argument("--ground", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=1000)
     args = ap.parse_args()

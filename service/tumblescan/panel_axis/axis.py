@@ -217,3 +217,28 @@ def fit_with_orthogonal(
     cov = cov * np.outer(norms, norms)
     res_axis = residuals(sol.x)[: len(axis_planes)]
     return DirectionFit(d, basis, cov, chi2, dof, res_axis, groups[0][1] ** 2)
+
+
+# Systematic edge errors (PSF, shading, a thin side face) that do not average out along an edge:
+# a shift of the whole edge, and a differential shift of one end against the other.
+EDGE_BIAS_PX = 0.01
+EDGE_TILT_BIAS_PX = 0.003
+
+
+def with_edge_bias(fit: DirectionFit, planes: list[PlaneObs], half_lengths_px: list[float]) -> DirectionFit:
+    """``fit`` with its covariance widened for a bias of the edge model: noise averages down along
+    an edge, a bias does not. Each line gets an independent offset bias of ``EDGE_BIAS_PX`` and an
+    angle bias of ``EDGE_TILT_BIAS_PX / half length``; their effect on the direction,
+    ``(Σ n_i n_iᵀ/b_i²)⁻¹`` in the tangent plane, is added to the noise covariance. The fit itself
+    (its weights) is unchanged."""
+    d = fit.direction
+    N = np.array([p.normal for p in planes])
+    b2 = np.array(
+        [
+            (p.dn_doffset @ d) ** 2 * EDGE_BIAS_PX**2 + (p.dn_dangle @ d) ** 2 * (EDGE_TILT_BIAS_PX / max(h, 1.0)) ** 2
+            for p, h in zip(planes, half_lengths_px, strict=True)
+        ]
+    )
+    info = fit.basis @ ((N / np.maximum(b2, 1e-30)[:, None]).T @ N) @ fit.basis.T
+    cov = fit.cov_tangent_rad2 + np.linalg.pinv(info, hermitian=True)
+    return DirectionFit(d, fit.basis, cov, fit.chi2, fit.dof, fit.residuals, fit.weights)

@@ -20,7 +20,14 @@ import numpy as np
 
 from .._typing import FloatArray, Progress, no_progress
 from ..imaging.camera import PinholeCamera
-from .axis import DirectionFit, PlaneObs, angle_between_lines_deg, fit_direction, fit_with_orthogonal
+from .axis import (
+    DirectionFit,
+    PlaneObs,
+    angle_between_lines_deg,
+    fit_direction,
+    fit_with_orthogonal,
+    with_edge_bias,
+)
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
 from .frames import R_ecef_from_enu, canonical, pitch_yaw_deg, pitch_yaw_jacobian
@@ -95,6 +102,7 @@ def estimate_axis(
     separate = fit
     if orthogonal:
         fit = fit_with_orthogonal(fit, [e.plane for e in axis_family.edges], orthogonal)
+    fit = with_edge_bias(fit, [e.plane for e in axis_family.edges], [e.line.half_length_px for e in axis_family.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
     a_img = axis_family.image_direction()
