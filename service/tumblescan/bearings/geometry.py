@@ -193,14 +193,12 @@ def triangulate(
         J[idx], chi2[idx] = Ja, ca
         if it == iterations:
             break
-        with np.errstate(all="ignore"):
-            step = np.linalg.solve(Ja, ga[..., None])[..., 0]
+        step = _solve_sym(Ja, ga)
         step = np.where(np.isfinite(step), step, 0.0)
         p[idx] = pa + step
         small = np.linalg.norm(step, axis=1) <= 1e-12 * scale[idx] + 1e-12
         active[idx[small]] = False
-    with np.errstate(all="ignore"):
-        cov = np.linalg.inv(J)
+    cov = inv_sym(J)
     d1, d2 = p - s1, p - s2
     range_m = np.stack([np.linalg.norm(d1, axis=1), np.linalg.norm(d2, axis=1)], axis=1)
     cosang = np.einsum("ij,ij->i", d1, d2) / np.maximum(range_m[:, 0] * range_m[:, 1], 1e-300)
@@ -212,4 +210,29 @@ def triangulate(
 
 def crlb(p_job_m: FloatArray, stations: tuple[Station, Station], obs: tuple[Observation, Observation]) -> FloatArray:
     """The single-frame Cramér-Rao bound ``C = J⁻¹`` (n, 3, 3) in m² at the true positions."""
-    return np.linalg.inv(information(p_job_m, stations, obs))
+    return inv_sym(information(p_job_m, stations, obs))
+
+
+def inv_sym(J: FloatArray) -> FloatArray:
+    """Inverse of a stack of symmetric matrices (n, 3, 3); a singular one becomes all-inf."""
+    with np.errstate(all="ignore"):
+        try:
+            return np.asarray(np.linalg.inv(J))
+        except np.linalg.LinAlgError:
+            w, V = np.linalg.eigh(J)
+            scale = np.maximum(np.abs(w).max(axis=1, keepdims=True), 1e-300)
+            w_inv = np.where(np.abs(w) > 1e-14 * scale, 1.0 / w, np.inf)
+            return np.asarray(np.einsum("nij,nj,nkj->nik", V, w_inv, V))
+
+
+def _solve_sym(J: FloatArray, g: FloatArray) -> FloatArray:
+    """``J⁻¹ g`` per row; rows whose J is singular or not finite get a zero step."""
+    with np.errstate(all="ignore"):
+        bad = ~np.all(np.isfinite(J), axis=(1, 2)) | ~np.all(np.isfinite(g), axis=1)
+        Jc = np.where(bad[:, None, None], np.eye(3), J)
+        gc = np.where(bad[:, None], 0.0, g)
+        try:
+            step = np.linalg.solve(Jc, gc[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            step = np.einsum("nij,nj->ni", np.nan_to_num(inv_sym(Jc), posinf=0.0, neginf=0.0), gc)
+    return np.where(np.isfinite(step), step, 0.0)

@@ -160,7 +160,7 @@ def _stations(value: Any, frame: JobFrame) -> tuple[Station, Station]:
             raise _bad(f"{f}.id", "must be a non-empty string")
         for key in ("sigma_az_deg", "sigma_el_deg"):
             if key not in st:
-                raise _bad(f"{f}.{key}", "is missing (the 1σ angle error in degrees)")
+                raise _bad(f"{f}.{key}", "is missing (the 1-sigma angle error in degrees)")
         sa = _sigma_deg(st["sigma_az_deg"], f"{f}.sigma_az_deg")
         se = _sigma_deg(st["sigma_el_deg"], f"{f}.sigma_el_deg")
         ps = _number(st.get("position_sigma_m", 0.0), f"{f}.position_sigma_m")

@@ -7,6 +7,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+from .._typing import Progress, no_progress
+from .estimate import estimate
+from .inputs import BearingsInput, Limits, read_input
+from .options import EstimateOptions
 from .simulate import Simulation, SimulationConfig, invalid_variants, simulate
 
 
@@ -28,3 +32,21 @@ def simulate_to(out: Path, config: SimulationConfig) -> Simulation:
         fields[name] = field
     write_json(out / "invalid" / "fields.json", fields)
     return sim
+
+
+def estimate_file(
+    path: Path,
+    options: EstimateOptions | None = None,
+    *,
+    limits: Limits | None = None,
+    progress: Progress = no_progress,
+) -> tuple[BearingsInput, dict[str, Any]]:
+    """Read and validate ``path`` (an ``InputError`` when it is bad), then estimate."""
+    inp = read_input(path, limits)
+    return inp, estimate(inp, options, progress)
+
+
+def write_report(path: Path, inp: BearingsInput, result: dict[str, Any], *, title: str) -> None:
+    from .report import build_report
+
+    path.write_text(build_report(inp, result, title=title), encoding="utf-8")

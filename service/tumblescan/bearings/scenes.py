@@ -71,7 +71,7 @@ def _paper_stations(
 
 
 def _times(frames: int, dt_s: float) -> FloatArray:
-    return np.arange(frames) * dt_s
+    return np.arange(frames, dtype=np.float64) * dt_s
 
 
 def _move(p_mid: FloatArray, v: FloatArray, t_s: FloatArray) -> FloatArray:

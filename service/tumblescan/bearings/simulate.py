@@ -101,7 +101,7 @@ def _measure_station(
     fa_el = rng.uniform(lo_el, hi_el, size=n_fa)
     fa_snr = rng.uniform(3.0, 6.0, size=n_fa)
     # Rows: (az noisy, el noisy, az true, el true, snr, target or -1).
-    rows = [(az_n[j], el_n[j], az[j], el[j], snr[j], j) for j in np.flatnonzero(seen)]
+    rows = [(az_n[j], el_n[j], az[j], el[j], snr[j], j) for j in np.flatnonzero(seen).tolist()]
     rows += [(fa_az[j], fa_el[j], fa_az[j], fa_el[j], fa_snr[j], -1) for j in range(n_fa)]
     rows.sort(key=lambda r: float(wrap_rad(r[0])))
     noisy, clean = [], []
@@ -216,8 +216,8 @@ def _ambiguity(
     the ghost pairs and each observable target's own χ²."""
     k = len(ids1)
     obs_idx = np.flatnonzero(observable)
-    a = np.array([pos[0][ids1[j]] for j in obs_idx], dtype=np.int64)
-    b = np.array([pos[1][ids2[j]] for j in obs_idx], dtype=np.int64)
+    a = np.array([pos[0][str(ids1[j])] for j in obs_idx], dtype=np.int64)
+    b = np.array([pos[1][str(ids2[j])] for j in obs_idx], dtype=np.int64)
     chi2_true = np.full(k, np.nan)
     if obs_idx.size:
         chi2_true[obs_idx] = triangulate(stations, observations(dets, a, b)).chi2

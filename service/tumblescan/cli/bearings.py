@@ -43,5 +43,50 @@ def simulate(
     sim = simulate_to(out, config)
     n = sum(len(v) for fr in sim.input["frames"] for v in fr["detections"].values())
     typer.echo(
-        f"wrote {out}/input.json ({sim.truth['targets']} targets, {len(sim.input['frames'])} frames, {n} detections), input_noise_free.json, truth.json, invalid/"
+        f"wrote {out}/input.json ({sim.truth['targets']} targets, {len(sim.input['frames'])} frames, "
+        f"{n} detections), input_noise_free.json, truth.json, invalid/"
+    )
+
+
+@app.command()
+@input_errors
+def estimate(
+    input_file: Annotated[Path, typer.Argument(help="tumblescan.bearings.input/1 JSON")],
+    as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON on stdout")] = False,
+    method: Annotated[str, typer.Option(help="ml (recommended) or paper (the paper's method, for comparison)")] = "ml",
+    gate_chi2: Annotated[float, typer.Option(min=0.1, max=1000.0, help="chi-square gate on a pair (1 dof)")] = 16.0,
+    tracks: Annotated[bool, typer.Option(help="link targets into tracks across frames")] = True,
+    out: Annotated[Path | None, typer.Option(help="also write the result JSON here")] = None,
+    report: Annotated[Path | None, typer.Option(help="write the HTML report here")] = None,
+) -> None:
+    """Associate, locate and link the targets seen by two bearings-only stations."""
+    import json
+    import sys
+
+    from ..bearings.options import EstimateOptions
+    from ..bearings.pipeline import estimate_file, write_json, write_report
+    from ..bearings.result import failure_document
+    from ..errors import InputError
+
+    if method not in ("ml", "paper"):
+        raise typer.BadParameter(f"{method!r} is not 'ml' or 'paper'", param_hint="--method")
+    options = EstimateOptions(method=method, gate_chi2=gate_chi2, link_tracks=tracks)
+    try:
+        inp, result = estimate_file(input_file, options)
+    except InputError as exc:
+        if as_json:
+            sys.stdout.write(json.dumps(failure_document(exc.code, str(exc), exc.field)) + "\n")
+        raise
+    if out is not None:
+        write_json(out, result)
+    if report is not None:
+        write_report(report, inp, result, title=f"Bearings: {input_file.name}")
+    if as_json:
+        sys.stdout.write(json.dumps(result) + "\n")
+        return
+    s = result["summary"]
+    typer.echo(
+        f"{s['targets']} targets in {len(result['frames'])} frames ({s['ambiguous']} ambiguous, {s['tracks']} tracks); "
+        f"unassociated detections: {', '.join(f'{k} {v}' for k, v in s['unassociated'].items())}; "
+        f"{result['timings_ms']['total']:.0f} ms"
     )
