@@ -2,7 +2,7 @@
 
 Edges carry a cost (negative: worth taking); a missing edge costs 0 and means "leave both
 ends unassigned". Most components of a realistic graph are one edge and are decided without
-a solver; the rest go to ``scipy.optimize.linear_sum_assignment`` on their own small matrix.
+a solver; the rest go to ``scipy.optimize.linear_sum_assignment``, a few components per dense matrix.
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import BoolArray, FloatArray, IntArray
+
+BATCH_ROWS = 200
 
 
 def assign_sparse(rows: IntArray, cols: IntArray, cost: FloatArray, n_rows: int, n_cols: int) -> BoolArray:
@@ -36,10 +38,14 @@ def assign_sparse(rows: IntArray, cols: IntArray, cost: FloatArray, n_rows: int,
     multi = np.flatnonzero(~single)
     if multi.size == 0:
         return chosen
-    # Edges of each multi-edge component, contiguous after a stable sort by component.
+    # Components are independent, and a non-edge costs the same as leaving a node out, so
+    # several components can share one dense problem: batches of about BATCH_ROWS rows.
     multi = multi[np.argsort(comp[multi], kind="stable")]
-    bounds = np.flatnonzero(np.diff(comp[multi])) + 1
-    for edges in np.split(multi, bounds):
+    row_keys = np.unique(comp[multi].astype(np.int64) * n_rows + rows[multi])
+    rows_per_comp = np.bincount(row_keys // n_rows, minlength=sizes.size)
+    batch_of_comp = np.cumsum(rows_per_comp) // BATCH_ROWS
+    batch = batch_of_comp[comp[multi]]
+    for edges in np.split(multi, np.flatnonzero(np.diff(batch)) + 1):
         r_u, r_i = np.unique(rows[edges], return_inverse=True)
         c_u, c_i = np.unique(cols[edges], return_inverse=True)
         C = np.zeros((r_u.size, c_u.size))

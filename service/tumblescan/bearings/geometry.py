@@ -116,7 +116,7 @@ def information(
     for st, ob in zip(stations, obs, strict=True):
         _, _, H = angle_jacobian(p_job_m, st)
         W = weight_matrices(H, ob.sigma_az_rad, ob.sigma_el_rad, st.position_sigma_m)
-        J += np.einsum("nji,njk,nkl->nil", H, W, H)
+        J += np.swapaxes(H, 1, 2) @ (W @ H)
     return J
 
 
@@ -186,17 +186,18 @@ def triangulate(
             A, E, H = angle_jacobian(pa, st)
             res = np.stack([wrap_rad(ob.az_rad[idx] - A), ob.el_rad[idx] - E], axis=-1)
             W = weight_matrices(H, ob.sigma_az_rad[idx], ob.sigma_el_rad[idx], st.position_sigma_m)
-            Wr = np.einsum("nij,nj->ni", W, res)
-            Ja += np.einsum("nji,njk,nkl->nil", H, W, H)
-            ga += np.einsum("nji,nj->ni", H, Wr)
-            ca += np.einsum("ni,ni->n", res, Wr)
+            Wr = (W @ res[..., None])[..., 0]
+            Ht = np.swapaxes(H, 1, 2)
+            Ja += Ht @ (W @ H)
+            ga += (Ht @ Wr[..., None])[..., 0]
+            ca += np.sum(res * Wr, axis=1)
         J[idx], chi2[idx] = Ja, ca
         if it == iterations:
             break
         step = _solve_sym(Ja, ga)
         step = np.where(np.isfinite(step), step, 0.0)
         p[idx] = pa + step
-        small = np.linalg.norm(step, axis=1) <= 1e-12 * scale[idx] + 1e-12
+        small = np.linalg.norm(step, axis=1) <= 1e-10 * scale[idx] + 1e-12
         active[idx[small]] = False
     cov = inv_sym(J)
     d1, d2 = p - s1, p - s2

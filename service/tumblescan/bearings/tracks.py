@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._typing import FloatArray, IntArray
+from .._typing import BoolArray, FloatArray, IntArray
 from .assign import assign_sparse
 
 NEIGHBOURS = 6
@@ -53,13 +53,13 @@ def link_tracks(
         live = [n for n, tr in enumerate(tracks) if f - tr.last_frame <= max_gap_frames + 1]
         ids = np.full(k, -1, dtype=np.int64)
         if live and k:
-            pred, radius = _predict(tracks, live, t, max_speed_m_s, max_accel_m_s2)
+            pred, radius, S_pred, has_v = _predict(tracks, live, t, max_speed_m_s, max_accel_m_s2)
             tree = cKDTree(pred)
             dist, idx = tree.query(p, k=min(NEIGHBOURS, len(live)), distance_upper_bound=float(radius.max()))
             dist, idx = dist.reshape(k, -1), idx.reshape(k, -1)
             fix_i, nb = np.nonzero(np.isfinite(dist))
             track_i = idx[fix_i, nb]
-            cost = _cost(tracks, live, t, p, cov, sigma, pred, radius, fix_i, track_i, max_accel_m_s2)
+            cost = _cost(p, cov, sigma, pred, radius, S_pred, has_v, fix_i, track_i)
             keep = cost < 0.0
             fix_i, track_i, cost = fix_i[keep], track_i[keep], cost[keep]
             chosen = assign_sparse(fix_i, track_i, cost, k, len(live))
@@ -79,53 +79,54 @@ def link_tracks(
 
 def _predict(
     tracks: list[_Track], live: list[int], t: float, max_speed_m_s: float, max_accel_m_s2: float
-) -> tuple[FloatArray, FloatArray]:
-    """Predicted positions (n, 3) and gate radii (n,) in m of the live tracks at time ``t``."""
-    pred = np.empty((len(live), 3))
-    radius = np.empty(len(live))
-    for n, i in enumerate(live):
-        tr = tracks[i]
-        dt = t - tr.last_t
-        if tr.fixes < 2:
-            pred[n] = tr.last_p
-            radius[n] = max_speed_m_s * dt + 6.0 * tr.last_sigma_m
-            continue
-        span = tr.last_t - tr.first_t
-        v = (tr.last_p - tr.first_p) / span
-        pred[n] = tr.last_p + v * dt
-        radius[n] = 6.0 * tr.last_sigma_m * (1.0 + 2.0 * dt / span) + max_accel_m_s2 * (span + dt) * dt
-    return pred, radius
+) -> tuple[FloatArray, FloatArray, FloatArray, BoolArray]:
+    """Predicted positions (n, 3), gate radii (n,) in m, the prediction's covariance (n, 3, 3)
+    in m² and whether each live track has a velocity yet, at time ``t``.
+
+    The covariance is ``(1 + 2 dt/span)² C_last + (a_max span dt)² I``: the last fix's error
+    carried by a velocity measured over ``span``, plus room for acceleration."""
+    n = len(live)
+    last_p = np.array([tracks[i].last_p for i in live])
+    first_p = np.array([tracks[i].first_p for i in live])
+    last_t = np.array([tracks[i].last_t for i in live])
+    first_t = np.array([tracks[i].first_t for i in live])
+    sigma = np.array([tracks[i].last_sigma_m for i in live])
+    cov = np.array([tracks[i].last_cov_m2 for i in live])
+    has_v = np.array([tracks[i].fixes >= 2 for i in live], dtype=bool)
+    dt = t - last_t
+    span = np.where(has_v, last_t - first_t, 1.0)
+    v = np.where(has_v[:, None], (last_p - first_p) / span[:, None], 0.0)
+    pred = last_p + v * dt[:, None]
+    grow = 1.0 + 2.0 * dt / span
+    accel = max_accel_m_s2 * span * dt
+    radius = np.where(has_v, 6.0 * sigma * grow + accel, max_speed_m_s * dt + 6.0 * sigma)
+    S = grow[:, None, None] ** 2 * cov + (accel**2)[:, None, None] * np.eye(3)[None]
+    return pred, radius, S.reshape(n, 3, 3), has_v
 
 
 def _cost(
-    tracks: list[_Track],
-    live: list[int],
-    t: float,
     p: FloatArray,
     cov: FloatArray,
     sigma: FloatArray,
     pred: FloatArray,
     radius: FloatArray,
+    S_pred: FloatArray,
+    has_v: BoolArray,
     fix_i: IntArray,
     track_i: IntArray,
-    max_accel_m_s2: float,
 ) -> FloatArray:
     """Cost of linking fix ``fix_i`` to live track ``track_i`` (negative inside the gate).
 
-    A track with a velocity is gated on the Mahalanobis distance of the innovation (6σ), with
-    ``S = (1 + 2 dt/span)² C_last + C_new + (a_max span dt)² I``; a new track on the distance
-    it could have flown, widened by 6σ of the new fix."""
+    A track with a velocity is gated on the Mahalanobis distance of the innovation (6σ) with
+    covariance ``S_pred + C_new``; a new track on the distance it could have flown, widened by
+    6σ of the new fix."""
     e = p[fix_i] - pred[track_i]
     d = np.linalg.norm(e, axis=1)
     cost = (d / (radius[track_i] + 6.0 * sigma[fix_i])) ** 2 - 1.0
-    has_v = np.array([tracks[live[n]].fixes >= 2 for n in track_i], dtype=bool)
-    if has_v.any():
-        idx = np.flatnonzero(has_v)
-        S = cov[fix_i[idx]].copy()
-        for row, n in enumerate(track_i[idx].tolist()):
-            tr = tracks[live[n]]
-            dt, span = t - tr.last_t, tr.last_t - tr.first_t
-            S[row] += (1.0 + 2.0 * dt / span) ** 2 * tr.last_cov_m2 + (max_accel_m_s2 * span * dt) ** 2 * np.eye(3)
-        m2 = np.einsum("ni,ni->n", e[idx], np.linalg.solve(S, e[idx][..., None])[..., 0])
-        cost[idx] = m2 / 36.0 - 1.0
+    idx = np.flatnonzero(has_v[track_i])
+    if idx.size:
+        S = S_pred[track_i[idx]] + cov[fix_i[idx]]
+        with np.errstate(all="ignore"):
+            m2 = np.einsum("ni,ni->n", e[idx], np.linalg.solve(S, e[idx][..., None])[..., 0])
+        cost[idx] = np.where(np.isfinite(m2), m2 / 36.0 - 1.0, 1.0)
     return cost
