@@ -14,12 +14,8 @@ from tumblescan.bearings.options import EstimateOptions
 from tumblescan.bearings.simulate import SimulationConfig, invalid_variants, simulate
 from tumblescan.errors import InputError
 from tumblescan.jobs.kind import FinishedJob, JobContext, Submission
+from tumblescan.jobs.kinds.bearings import BEARINGS_INPUT, Bearings
 from tumblescan_client.results.bearings import BearingsResult as ClientResult
-
-# Until the generic job layer (jobs/kinds/ as a package) is merged from main.
-BEARINGS_INPUT, Bearings = (lambda m: (m.BEARINGS_INPUT, m.Bearings))(
-    pytest.importorskip("tumblescan.jobs.kinds.bearings", exc_type=ImportError)
-)
 
 SIM = simulate(SimulationConfig(scene="paper", seed=2, frames=3, clutter=0.4))
 

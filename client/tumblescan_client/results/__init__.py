@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
+from .bearings import BearingsResult
 from .linescan import MotionResult
 
 # Kind name -> result model (one line per kind, as in the service's registry).
 RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
+    "bearings": BearingsResult,
 }
 
 
@@ -22,4 +24,4 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "MotionResult", "UnknownResult", "result_model"]
+__all__ = ["RESULT_MODELS", "BearingsResult", "MotionResult", "UnknownResult", "result_model"]

@@ -33,7 +33,7 @@ class BearingsTarget(_Model):
     chi2: float
     range_m: list[float]
     parallax_deg: float
-    flags: list[str] = []  # ambiguous, low_parallax, corrected_by_track
+    flags: list[str]  # ambiguous, low_parallax, corrected_by_track
     geodetic: Geodetic | None = None
 
 

@@ -17,10 +17,12 @@ class UnknownKindError(InputError):
 @cache
 def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
+    from .kinds.bearings import Bearings
     from .kinds.linescan import LinescanMotion
 
     listed: list[JobKind] = [
         LinescanMotion(),
+        Bearings(),
     ]
     return {k.name: k for k in listed}
 
