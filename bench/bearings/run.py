@@ -79,9 +79,12 @@ def run_case(case: Case, method: str) -> tuple[Score, float, float]:
         times.append(seconds)
         if method == "ml" and seed == 0:
             clean = score(timed_run(json.dumps(sim.input_noise_free), method)[0], sim.truth)
-            noise_free = max(noise_free, clean.max_error_m)
             if clean.clean_associated != clean.clean:
                 noise_free = float("inf")
+            elif clean.clean:
+                noise_free = max(noise_free, clean.max_error_m)
+            else:
+                noise_free = float("nan")  # no clean target-frame: every pairing is a perfect ghost
     return total, float(np.mean(times)), noise_free
 
 
@@ -211,7 +214,7 @@ def main() -> None:
                         num(s.nees_mean) if method == "ml" else f"({num(s.nees_mean)})",
                         pct(amb),
                         f"{seconds:.3f} s",
-                        f"{noise_free:.1e} m" if method == "ml" else "-",
+                        f"{noise_free:.1e} m" if method == "ml" and not np.isnan(noise_free) else "-",
                         goals_met(case, s) if method == "ml" else "",
                     ]
                 )

@@ -116,3 +116,19 @@ def test_ecef_results_carry_geodetic_positions_above_the_stations() -> None:
     for t in (t for fr in result["frames"] for t in fr["targets"]):
         assert 350e3 < t["geodetic"]["height_m"] < 1600e3
         assert abs(np.linalg.norm(t["position_m"]) - 6.37e6) < 2.0e6
+
+
+def test_multi_frame_association_resolves_ambiguous_frames_without_losing_clean_ones() -> None:
+    single, multi = Score(), Score()
+    corrected = 0
+    for seed in range(4):
+        sim = simulate(SimulationConfig(scene="close", seed=seed))
+        inp = parse_input(sim.input)
+        single.add(score(estimate(inp, EstimateOptions(multi_frame=False)), sim.truth))
+        result = estimate(inp)
+        multi.add(score(result, sim.truth))
+        corrected += sum("corrected_by_track" in t["flags"] for fr in result["frames"] for t in fr["targets"])
+    assert multi.ambiguous > 40
+    assert multi.ambiguous_right >= 0.9 * multi.ambiguous > single.ambiguous_right
+    assert multi.clean_associated >= single.clean_associated - 1
+    assert corrected > 0

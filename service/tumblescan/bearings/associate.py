@@ -89,9 +89,30 @@ def associate_frame(
     ambiguity_margin: float = 4.0,
 ) -> FrameFixes:
     """Targets of one frame: the likelihood-ratio assignment (cost χ² − gate, leave-out 0)."""
-    n1, n2 = len(dets[0]), len(dets[1])
     cand = gated_candidates(stations, basis, dets, gate)
-    chosen = assign_sparse(cand.i1, cand.i2, cand.fix.chi2 - gate, n1, n2)
+    return assign_frame(cand, len(dets[0]), len(dets[1]), gate=gate, ambiguity_margin=ambiguity_margin)
+
+
+def assign_frame(
+    cand: Candidates,
+    n1: int,
+    n2: int,
+    *,
+    gate: float,
+    ambiguity_margin: float,
+    bonus: FloatArray | None = None,
+) -> FrameFixes:
+    """One-to-one assignment of a frame's candidates on ``χ² − gate − bonus``.
+
+    ``bonus`` (per candidate, ≥ 0) favours pairs that other frames support; a pair taken
+    only because of it (not the single-frame choice) is marked ``corrected``."""
+    cost = cand.fix.chi2 - gate
+    chosen = assign_sparse(cand.i1, cand.i2, cost, n1, n2)
+    corrected = np.zeros(cand.i1.size, dtype=bool)
+    if bonus is not None and np.any(bonus > 0):
+        single = chosen
+        chosen = assign_sparse(cand.i1, cand.i2, cost - bonus, n1, n2)
+        corrected = chosen & ~single
     ambiguous = close_alternatives(cand.i1, cand.i2, cand.fix.chi2, chosen, n1, n2, ambiguity_margin)
     fix = _take(cand.fix, chosen)
     return FrameFixes(
@@ -103,7 +124,7 @@ def associate_frame(
         range_m=fix.range_m,
         parallax_rad=fix.parallax_rad,
         ambiguous=ambiguous[chosen],
-        corrected=np.zeros(int(chosen.sum()), dtype=bool),
+        corrected=corrected[chosen],
         n1=n1,
         n2=n2,
     )

@@ -14,10 +14,11 @@ from typing import Any
 import numpy as np
 
 from .._typing import IntArray, Progress, no_progress
-from .associate import FrameFixes, associate_frame, observations
+from .associate import FrameFixes, assign_frame, gated_candidates, observations
 from .epipolar import baseline_basis
 from .geometry import triangulate
 from .inputs import BearingsInput
+from .multiframe import associate_frames
 from .options import EstimateOptions
 from .paper import common_frame, paper_correct, paper_match
 from .result import RESULT_SCHEMA
@@ -70,19 +71,30 @@ def estimate(
 
 def _frames_ml(inp: BearingsInput, options: EstimateOptions, progress: Progress) -> list[FrameFixes]:
     basis = baseline_basis(inp.stations)
-    out = []
+    cands = []
     for n, fr in enumerate(inp.frames):
-        progress("associating", 0.8 * n / len(inp.frames))
-        out.append(
-            associate_frame(
-                inp.stations,
-                basis,
-                fr.detections,
-                gate=options.gate_chi2,
-                ambiguity_margin=options.ambiguity_margin_chi2,
-            )
+        progress("associating", 0.7 * n / len(inp.frames))
+        cands.append(gated_candidates(inp.stations, basis, fr.detections, options.gate_chi2))
+    if options.multi_frame and len(inp.frames) > 1:
+        progress("associating across frames", 0.7)
+        return associate_frames(
+            inp.frames,
+            inp.stations,
+            cands,
+            gate=options.gate_chi2,
+            ambiguity_margin=options.ambiguity_margin_chi2,
+            max_rate_rad_s=np.radians(options.max_angular_rate_deg_s),
         )
-    return out
+    return [
+        assign_frame(
+            c,
+            len(fr.detections[0]),
+            len(fr.detections[1]),
+            gate=options.gate_chi2,
+            ambiguity_margin=options.ambiguity_margin_chi2,
+        )
+        for fr, c in zip(inp.frames, cands, strict=True)
+    ]
 
 
 def _finite_rows(fx: FrameFixes) -> np.ndarray:

@@ -26,6 +26,12 @@ class EstimateOptions(BaseModel):
         description="flag a pair ambiguous when an alternative is this close in chi-square",
     )
     low_parallax_deg: float = Field(default=2.0, ge=0.0, le=90.0)
+    multi_frame: bool = Field(
+        default=True, description="resolve ambiguous frames with the pairs other frames support (station tracks)"
+    )
+    max_angular_rate_deg_s: float = Field(
+        default=5.0, gt=0.0, le=180.0, description="fastest target across the sky, for starting station tracks"
+    )
     link_tracks: bool = Field(default=True, description="give targets track ids stable across frames")
     max_speed_m_s: float = Field(default=10_000.0, gt=0.0, description="fastest target, for starting tracks")
     max_gap_frames: int = Field(default=2, ge=0, le=100, description="frames a track may go unseen")
