@@ -60,11 +60,20 @@ def assign_sparse(rows: IntArray, cols: IntArray, cost: FloatArray, n_rows: int,
 
 
 def close_alternatives(
-    rows: IntArray, cols: IntArray, score: FloatArray, chosen: BoolArray, n_rows: int, n_cols: int, margin: float
+    rows: IntArray,
+    cols: IntArray,
+    chi2: FloatArray,
+    chosen: BoolArray,
+    n_rows: int,
+    n_cols: int,
+    margin: float,
+    gate: float,
 ) -> BoolArray:
-    """Chosen edges with another edge at one of their ends scoring at most ``margin`` more.
+    """Chosen edges for which another assignment costs at most ``margin`` more χ².
 
-    Returns a mask over the edges (True only on chosen ones)."""
+    The alternatives tried are the ones an edge not taken opens (cost of an edge χ² − gate,
+    leaving a node out 0): a swap of two chosen pairs' partners, or taking a free node in place
+    of a chosen pair's partner. Returns a mask over the edges (True only on chosen ones)."""
     at_row = np.full(n_rows, -1)
     at_col = np.full(n_cols, -1)
     idx = np.flatnonzero(chosen)
@@ -72,8 +81,25 @@ def close_alternatives(
     at_col[cols[idx]] = idx
     flagged = np.zeros(rows.size, dtype=bool)
     other = np.flatnonzero(~chosen)
-    for owner in (at_row[rows[other]], at_col[cols[other]]):
-        has = owner >= 0
-        close = has & (score[other] <= np.where(has, score[owner], np.inf) + margin)
-        flagged[owner[close]] = True
+    if other.size == 0:
+        return flagged
+    key = rows.astype(np.int64) * n_cols + cols
+    order = np.argsort(key)
+    o_r, o_c = at_row[rows[other]], at_col[cols[other]]
+    both = (o_r >= 0) & (o_c >= 0)
+    # Swap: (r, c) and (row of c's pair, col of r's pair) in place of the two chosen pairs.
+    partner_key = np.where(both, rows[np.maximum(o_c, 0)].astype(np.int64) * n_cols + cols[np.maximum(o_r, 0)], -1)
+    pos = np.clip(np.searchsorted(key[order], partner_key), 0, key.size - 1)
+    found = both & (key[order][pos] == partner_key)
+    partner_chi2 = np.where(found, chi2[order][pos], gate)  # no partner edge: both left out
+    delta = np.full(other.size, np.inf)
+    delta[both] = (chi2[other] + partner_chi2 - chi2[np.maximum(o_r, 0)] - chi2[np.maximum(o_c, 0)])[both]
+    only_r = (o_r >= 0) & (o_c < 0)
+    only_c = (o_c >= 0) & (o_r < 0)
+    delta[only_r] = (chi2[other] - chi2[np.maximum(o_r, 0)])[only_r]
+    delta[only_c] = (chi2[other] - chi2[np.maximum(o_c, 0)])[only_c]
+    close = delta <= margin
+    for owner in (o_r, o_c):
+        hit = close & (owner >= 0)
+        flagged[owner[hit]] = True
     return flagged

@@ -104,16 +104,21 @@ def assign_frame(
 ) -> FrameFixes:
     """One-to-one assignment of a frame's candidates on ``χ² − gate − bonus``.
 
-    ``bonus`` (per candidate, ≥ 0) favours pairs that other frames support; a pair taken
-    only because of it (not the single-frame choice) is marked ``corrected``."""
+    ``bonus`` (per candidate, ≥ 0) favours pairs that other frames support; single-frame
+    choices without a close alternative get the same bonus, so only ambiguous pairings can
+    change. A pair taken only because of it (not the single-frame choice) is marked
+    ``corrected``."""
     cost = cand.fix.chi2 - gate
     chosen = assign_sparse(cand.i1, cand.i2, cost, n1, n2)
     corrected = np.zeros(cand.i1.size, dtype=bool)
     if bonus is not None and np.any(bonus > 0):
+        # A pairing with no close alternative in this frame keeps the same advantage, so only
+        # ambiguous ones can change.
         single = chosen
-        chosen = assign_sparse(cand.i1, cand.i2, cost - bonus, n1, n2)
+        clear = single & ~close_alternatives(cand.i1, cand.i2, cand.fix.chi2, single, n1, n2, ambiguity_margin, gate)
+        chosen = assign_sparse(cand.i1, cand.i2, cost - np.maximum(bonus, np.where(clear, bonus.max(), 0.0)), n1, n2)
         corrected = chosen & ~single
-    ambiguous = close_alternatives(cand.i1, cand.i2, cand.fix.chi2, chosen, n1, n2, ambiguity_margin)
+    ambiguous = close_alternatives(cand.i1, cand.i2, cand.fix.chi2, chosen, n1, n2, ambiguity_margin, gate)
     fix = _take(cand.fix, chosen)
     return FrameFixes(
         i1=cand.i1[chosen],
