@@ -58,10 +58,17 @@ CASES = (
 )
 
 
+METHODS = {
+    "ours (ML + multi-frame)": EstimateOptions(),
+    "ours (ML, single frame)": EstimateOptions(multi_frame=False),
+    "paper": EstimateOptions(method="paper"),
+}
+
+
 def timed_run(text: str, method: str) -> tuple[dict[str, Any], float]:
     """Parse, estimate and write the result JSON; returns the result and the seconds taken."""
     start = time.perf_counter()
-    result = estimate(parse_input(load_json(text)), EstimateOptions(method=method))
+    result = estimate(parse_input(load_json(text)), METHODS[method])
     json.dumps(result, allow_nan=False)
     return result, time.perf_counter() - start
 
@@ -77,7 +84,7 @@ def run_case(case: Case, method: str) -> tuple[Score, float, float]:
         result, seconds = timed_run(json.dumps(sim.input), method)
         total.add(score(result, sim.truth))
         times.append(seconds)
-        if method == "ml" and seed == 0:
+        if method != "paper" and seed == 0:
             clean = score(timed_run(json.dumps(sim.input_noise_free), method)[0], sim.truth)
             if clean.clean_associated != clean.clean:
                 noise_free = float("inf")
@@ -121,7 +128,7 @@ def speed_table(quick: bool) -> list[list[str]]:
         sim = simulate(SimulationConfig(scene="swarm", seed=100 + k, targets=k, clutter=clutter))
         text = json.dumps(sim.input)
         cells = [f"{k}" + (" (20 % clutter)" if clutter else "")]
-        for method in ("ml", "paper"):
+        for method in METHODS:
             reps = 1 if quick else 3
             cells.append(f"{min(timed_run(text, method)[1] for _ in range(reps)):.3f} s")
         goal = {10: 0.1, 100: 0.3, 1000: 2.0}[k] if not clutter else 3.0
@@ -170,7 +177,12 @@ def plot(points: dict[str, tuple[list[float], list[float], list[float]]], path: 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer seeds, no K=1000 accuracy cases")
+    parser.add_argument("--speed", action="store_true", help="only the speed table")
     args = parser.parse_args()
+    if args.speed:
+        with threadpool_limits(1):
+            print(markdown(["targets", *METHODS, "goal (ours)"], speed_table(quick=False)))
+        return
     OUT.mkdir(parents=True, exist_ok=True)
     header = [
         "case",
@@ -189,17 +201,20 @@ def main() -> None:
     ]
     rows = []
     points: dict[str, tuple[list[float], list[float], list[float]]] = {"ours (ML)": ([], [], []), "paper": ([], [], [])}
+    plotted = {"ours (ML + multi-frame)": "ours (ML)", "paper": "paper"}
     with threadpool_limits(1):
         for case in CASES:
             if args.quick and case.targets >= 1000:
                 continue
             if args.quick:
                 case = Case(**{**case.__dict__, "seeds": 2})
-            for method, label in (("ml", "ours (ML)"), ("paper", "paper")):
+            for method in METHODS:
+                label = method
                 s, seconds, noise_free = run_case(case, method)
-                points[label][0].extend(s.bound_m)
-                points[label][1].extend(s.error_m)
-                points[label][2].extend(s.ratio)
+                if method in plotted:
+                    points[plotted[method]][0].extend(s.bound_m)
+                    points[plotted[method]][1].extend(s.error_m)
+                    points[plotted[method]][2].extend(s.ratio)
                 amb = s.ambiguous_right / s.ambiguous if s.ambiguous else float("nan")
                 rows.append(
                     [
@@ -211,18 +226,18 @@ def main() -> None:
                         pct(s.excused_ghosts / s.observable if s.observable else float("nan")),
                         num(s.ratio_rms),
                         num(s.ratio_p99),
-                        num(s.nees_mean) if method == "ml" else f"({num(s.nees_mean)})",
+                        num(s.nees_mean) if method != "paper" else f"({num(s.nees_mean)})",
                         pct(amb),
                         f"{seconds:.3f} s",
-                        f"{noise_free:.1e} m" if method == "ml" and not np.isnan(noise_free) else "-",
-                        goals_met(case, s) if method == "ml" else "",
+                        f"{noise_free:.1e} m" if method != "paper" and not np.isnan(noise_free) else "-",
+                        goals_met(case, s) if method != "paper" else "",
                     ]
                 )
                 print(" | ".join(rows[-1]), flush=True)
         speed = speed_table(args.quick)
     text = "## Accuracy (per frame, clean target-frames)\n\n" + markdown(header, rows)
     text += "\n\n## Speed (swarm, 10 frames, one core, parse + estimate + JSON)\n\n"
-    text += markdown(["targets", "ours (ML)", "paper", "goal (ours)"], speed) + "\n"
+    text += markdown(["targets", *METHODS, "goal (ours)"], speed) + "\n"
     print(text)
     (OUT / "bearings.md").write_text(text)
     plot(points, OUT / "bearings_error_vs_bound.png")

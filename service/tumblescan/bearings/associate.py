@@ -9,7 +9,7 @@ import numpy as np
 from .._typing import BoolArray, FloatArray, IntArray
 from .assign import assign_sparse, close_alternatives
 from .epipolar import Basis, candidate_pairs, epipolar_angles, rays_job
-from .geometry import Fix, Observation, Station, closest_approach, triangulate
+from .geometry import Fix, Observation, Station, closest_approach, take_rows, triangulate
 from .inputs import Detections
 
 
@@ -66,18 +66,7 @@ def gated_candidates(
     # 3. ML triangulation of the survivors; the 1-dof χ² gate again on the full residual.
     fix = triangulate(stations, observations(dets, i1, i2))
     keep = fix.ok & (fix.chi2 <= gate)
-    return Candidates(i1[keep], i2[keep], _take(fix, keep))
-
-
-def _take(fix: Fix, keep: BoolArray | IntArray) -> Fix:
-    return Fix(
-        p_job_m=fix.p_job_m[keep],
-        cov_m2=fix.cov_m2[keep],
-        chi2=fix.chi2[keep],
-        range_m=fix.range_m[keep],
-        parallax_rad=fix.parallax_rad[keep],
-        ok=fix.ok[keep],
-    )
+    return Candidates(i1[keep], i2[keep], take_rows(fix, keep))
 
 
 def associate_frame(
@@ -119,7 +108,7 @@ def assign_frame(
         chosen = assign_sparse(cand.i1, cand.i2, cost - np.maximum(bonus, np.where(clear, bonus.max(), 0.0)), n1, n2)
         corrected = chosen & ~single
     ambiguous = close_alternatives(cand.i1, cand.i2, cand.fix.chi2, chosen, n1, n2, ambiguity_margin, gate)
-    fix = _take(cand.fix, chosen)
+    fix = take_rows(cand.fix, chosen)
     return FrameFixes(
         i1=cand.i1[chosen],
         i2=cand.i2[chosen],

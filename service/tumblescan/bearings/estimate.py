@@ -16,7 +16,7 @@ import numpy as np
 from .._typing import IntArray, Progress, no_progress
 from .associate import FrameFixes, assign_frame, gated_candidates, observations
 from .epipolar import baseline_basis
-from .geometry import triangulate
+from .geometry import take_rows, triangulate
 from .inputs import BearingsInput
 from .multiframe import associate_frames
 from .options import EstimateOptions
@@ -111,19 +111,7 @@ def _finite(fx: FrameFixes) -> FrameFixes:
     keep = _finite_rows(fx)
     if keep.all():
         return fx
-    return FrameFixes(
-        i1=fx.i1[keep],
-        i2=fx.i2[keep],
-        p_job_m=fx.p_job_m[keep],
-        cov_m2=fx.cov_m2[keep],
-        chi2=fx.chi2[keep],
-        range_m=fx.range_m[keep],
-        parallax_rad=fx.parallax_rad[keep],
-        ambiguous=fx.ambiguous[keep],
-        corrected=fx.corrected[keep],
-        n1=fx.n1,
-        n2=fx.n2,
-    )
+    return take_rows(fx, keep)
 
 
 def _describe(

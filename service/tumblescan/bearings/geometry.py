@@ -8,7 +8,9 @@ Every function is vectorised over a leading axis of targets (or candidate pairs)
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -149,6 +151,19 @@ class Fix:
     range_m: FloatArray  # (n, 2)
     parallax_rad: FloatArray  # (n,)
     ok: BoolArray  # (n,)  finite and in front of both stations
+
+
+RowsT = TypeVar("RowsT")
+
+
+def take_rows(rows: RowsT, keep: Any) -> RowsT:
+    """A copy of a dataclass of per-row arrays (``Fix``, ``FrameFixes``) with the rows ``keep``."""
+    arrays = {
+        f.name: getattr(rows, f.name)[keep]
+        for f in dataclasses.fields(rows)  # type: ignore[arg-type]
+        if isinstance(getattr(rows, f.name), np.ndarray)
+    }
+    return dataclasses.replace(rows, **arrays)  # type: ignore[type-var]
 
 
 def triangulate(
