@@ -132,3 +132,28 @@ def test_multi_frame_association_resolves_ambiguous_frames_without_losing_clean_
     assert multi.ambiguous_right >= 0.9 * multi.ambiguous > single.ambiguous_right
     assert multi.clean_associated >= single.clean_associated - 1
     assert corrected > 0
+
+
+@pytest.mark.parametrize(("scene", "model"), [("paper", "constant_velocity"), ("leo", "orbital")])
+def test_track_fits_beat_the_single_frame_bound_with_honest_covariance(scene: str, model: str) -> None:
+    ratios, nees = [], []
+    for seed in range(3):
+        sim = simulate(SimulationConfig(scene=scene, seed=seed, targets=8))
+        result = estimate(parse_input(sim.input))
+        owner: dict[str, set[int]] = {}
+        for fr, tf in zip(result["frames"], sim.truth["frames"], strict=True):
+            of = {t["detections"]["S1"]: t["target"] for t in tf["targets"]}
+            for t in fr["targets"]:
+                owner.setdefault(t["track"], set()).add(of[t["detections"]["S1"]])
+        truth_at = {f["t"]: f for f in sim.truth["frames"]}
+        for tr in result["tracks"]:
+            if len(owner[tr["id"]]) != 1 or len(tr["frames"]) < 10:
+                continue
+            assert tr["model"] == model
+            true = truth_at[tr["t_ref"]]["targets"][owner[tr["id"]].pop()]
+            e = np.subtract(tr["position_m"], true["position_m"])
+            ratios.append(float(e @ np.linalg.solve(true["crlb_m2"], e) / 3))
+            nees.append(float(e @ np.linalg.solve(tr["cov_m2"], e) / 3))
+    assert len(ratios) >= 20
+    assert np.sqrt(np.mean(ratios)) <= 1.3 / np.sqrt(10)  # the digest's tier-2 goal
+    assert 0.6 <= np.mean(nees) <= 1.5

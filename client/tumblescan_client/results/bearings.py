@@ -52,6 +52,23 @@ class BearingsSummary(_Model):
     method: str = "ml"
 
 
+class BearingsTrack(_Model):
+    """A track's motion fitted through its fixes (position, velocity, covariance at ``t_ref``)."""
+
+    id: str
+    frames: list[int]
+    t_ref: float
+    model: str  # constant_velocity or constant_acceleration
+    position_m: list[float]
+    velocity_m_s: list[float]
+    acceleration_m_s2: list[float] | None = None
+    cov_m2: list[list[float]]
+    velocity_cov_m2_s2: list[list[float]]
+    chi2: float
+    dof: int
+    fixes_used: int
+
+
 class BearingsError(_Model):
     code: str
     message: str
@@ -67,6 +84,7 @@ class BearingsResult(_Model):
     frame: Literal["local_enu", "ecef"] | None = None
     frames: list[BearingsFrame] = []
     summary: BearingsSummary | None = None
+    tracks: list[BearingsTrack] = []
     warnings: list[str] = []
     timings_ms: dict[str, float] = {}
     error: BearingsError | None = None

@@ -22,6 +22,7 @@ from .multiframe import associate_frames
 from .options import EstimateOptions
 from .paper import common_frame, paper_correct, paper_match
 from .result import RESULT_SCHEMA
+from .smooth import fit_tracks
 from .tracks import link_tracks
 
 
@@ -57,10 +58,21 @@ def estimate(
         shared = sum(len(fx) - np.unique(fx.i2).size for fx in fixes)
         if shared:
             warnings.append(f"paper method: {shared} station-2 detections were used by more than one target")
+    tracks: list[dict[str, Any]] = []
+    if track_ids is not None and options.link_tracks:
+        tracks = fit_tracks(
+            [f.t_s for f in inp.frames],
+            [f.index for f in inp.frames],
+            [fx.p_job_m for fx in fixes],
+            [fx.cov_m2 for fx in fixes],
+            track_ids,
+            orbital=inp.frame == "ecef",
+        )
     t_link = time.perf_counter()
     # 3. The result document.
     progress("writing the result", 0.95)
     doc = _document(inp, fixes, track_ids if options.link_tracks else None, options, warnings)
+    doc["tracks"] = tracks
     doc["timings_ms"] = {
         "associate": 1e3 * (t_assoc - start),
         "tracks": 1e3 * (t_link - t_assoc),

@@ -16,8 +16,8 @@ import numpy as np
 
 from .._typing import BoolArray, FloatArray
 
-WGS84_A_M = 6378137.0
-WGS84_F = 1.0 / 298.257223563
+MU_EARTH_M3_S2 = 3.986004418e14  # WGS84 GM
+OMEGA_EARTH_RAD_S = 7.2921150e-5  # the Earth's rotation rate
 
 
 @dataclass(frozen=True)

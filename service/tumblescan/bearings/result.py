@@ -54,6 +54,24 @@ class Summary(BaseModel):
     method: str = "ml"
 
 
+class TrackFit(BaseModel):
+    """A track's motion fitted through its fixes (position, velocity, covariance at ``t_ref``)."""
+
+    model_config = ConfigDict(extra="allow")
+    id: str
+    frames: list[int]
+    t_ref: float
+    model: str
+    position_m: list[float]
+    velocity_m_s: list[float]
+    acceleration_m_s2: list[float] | None = None
+    cov_m2: list[list[float]]
+    velocity_cov_m2_s2: list[list[float]]
+    chi2: float
+    dof: int
+    fixes_used: int
+
+
 class ErrorInfo(BaseModel):
     code: str
     message: str
@@ -70,6 +88,7 @@ class BearingsResult(BaseModel):
     frame: Literal["local_enu", "ecef"] | None = None
     frames: list[FrameResult] = []
     summary: Summary | None = None
+    tracks: list[TrackFit] = []
     warnings: list[str] = []
     timings_ms: dict[str, float] = {}
     error: ErrorInfo | None = None

@@ -13,7 +13,15 @@ from typing import Literal
 import numpy as np
 
 from .._typing import FloatArray
-from .geometry import R_ecef_from_enu, Station, bearings_of, geodetic_to_ecef, unit_vectors
+from .geometry import (
+    MU_EARTH_M3_S2,
+    OMEGA_EARTH_RAD_S,
+    R_ecef_from_enu,
+    Station,
+    bearings_of,
+    geodetic_to_ecef,
+    unit_vectors,
+)
 
 SceneName = Literal["paper", "close", "near-collinear", "baseline-plane", "similar-elevation", "swarm", "leo"]
 SCENES: tuple[str, ...] = ("paper", "close", "near-collinear", "baseline-plane", "similar-elevation", "swarm", "leo")
@@ -26,8 +34,6 @@ DEFAULT_TARGETS = {
     "swarm": 100,
     "leo": 10,
 }
-MU_EARTH_M3_S2 = 3.986004418e14
-OMEGA_EARTH_RAD_S = 7.2921150e-5
 
 
 @dataclass(frozen=True)
