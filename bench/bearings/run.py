@@ -26,7 +26,7 @@ from threadpoolctl import threadpool_limits
 from tumblescan.bearings.estimate import estimate
 from tumblescan.bearings.inputs import load_json, parse_input
 from tumblescan.bearings.options import EstimateOptions
-from tumblescan.bearings.score import Score, score
+from tumblescan.bearings.score import Score, score, score_tracks
 from tumblescan.bearings.simulate import SimulationConfig, simulate
 
 OUT = Path(__file__).resolve().parents[1] / "out"
@@ -73,8 +73,12 @@ def timed_run(text: str, method: str) -> tuple[dict[str, Any], float]:
     return result, time.perf_counter() - start
 
 
+TRACKS: dict[str, tuple[list[float], list[float]]] = {}
+
+
 def run_case(case: Case, method: str) -> tuple[Score, float, float]:
-    """Score over the case's seeds; mean time per 10 frames; worst noise-free error (m)."""
+    """Score over the case's seeds; mean time per 10 frames; worst noise-free error (m). The
+    track fits of ours (ML + multi-frame) go to ``TRACKS``."""
     total, times, noise_free = Score(), [], 0.0
     for seed in range(case.seeds):
         config = SimulationConfig(
@@ -83,6 +87,10 @@ def run_case(case: Case, method: str) -> tuple[Score, float, float]:
         sim = simulate(config)
         result, seconds = timed_run(json.dumps(sim.input), method)
         total.add(score(result, sim.truth))
+        if method == "ours (ML + multi-frame)":
+            r, n = score_tracks(result, sim.truth, min_frames=10)
+            TRACKS.setdefault(case.name, ([], []))[0].extend(r)
+            TRACKS[case.name][1].extend(n)
         times.append(seconds)
         if method != "paper" and seed == 0:
             clean = score(timed_run(json.dumps(sim.input_noise_free), method)[0], sim.truth)
@@ -236,6 +244,13 @@ def main() -> None:
                 print(" | ".join(rows[-1]), flush=True)
         speed = speed_table(args.quick)
     text = "## Accuracy (per frame, clean target-frames)\n\n" + markdown(header, rows)
+    track_rows = [
+        [name, str(len(r)), num(float(np.sqrt(np.mean(np.square(r))))), num(float(np.max(r))), num(float(np.mean(n)))]
+        for name, (r, n) in TRACKS.items()
+        if r
+    ]
+    text += "\n\n## Track fits (ours; tracks of one true target over all 10 frames; position at t_ref)\n\n"
+    text += markdown(["case", "tracks", "ratio RMS (goal <= 0.41)", "ratio max", "NEES/3"], track_rows)
     text += "\n\n## Speed (swarm, 10 frames, one core, parse + estimate + JSON)\n\n"
     text += markdown(["targets", *METHODS, "goal (ours)"], speed) + "\n"
     print(text)

@@ -143,3 +143,29 @@ def _errors(s: Score, rep: dict[str, Any], t: dict[str, Any]) -> None:
     s.nees.append(float(e @ np.linalg.solve(np.asarray(rep["cov_m2"]), e) / 3.0))
     s.bound_m.append(float(t["sigma_bound_m"]))
     s.error_m.append(float(np.linalg.norm(e)))
+
+
+def score_tracks(result: dict[str, Any], truth: dict[str, Any], *, min_frames: int) -> tuple[list[float], list[float]]:
+    """Track fits against the truth at ``t_ref``: ratios to the single-frame bound there and
+    NEES/3 of the fit's covariance, for tracks of one true target over ``min_frames`` frames."""
+    owner: dict[str, set[int]] = {}
+    for fr, tf in zip(result["frames"], truth["frames"], strict=True):
+        by_id = {}
+        for t in tf["targets"]:
+            for did in t["detections"].values():
+                if did is not None:
+                    by_id[did] = t["target"]
+        for t in fr["targets"]:
+            targets = {by_id.get(d, -1) for d in t["detections"].values()}
+            owner.setdefault(t["track"], set()).update(targets)
+    truth_at = {f["t"]: f for f in truth["frames"]}
+    ratios, nees = [], []
+    for tr in result.get("tracks", []):
+        members = owner.get(tr["id"], set())
+        if len(members) != 1 or -1 in members or len(tr["frames"]) < min_frames:
+            continue
+        true = truth_at[tr["t_ref"]]["targets"][next(iter(members))]
+        e = np.subtract(tr["position_m"], true["position_m"])
+        ratios.append(float(np.sqrt(e @ np.linalg.solve(np.asarray(true["crlb_m2"]), e) / 3.0)))
+        nees.append(float(e @ np.linalg.solve(np.asarray(tr["cov_m2"]), e) / 3.0))
+    return ratios, nees
