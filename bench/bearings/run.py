@@ -130,6 +130,14 @@ def goals_met(case: Case, s: Score) -> str:
     return "all met" if not failed else "missed: " + ", ".join(failed)
 
 
+def cpu_run(text: str, method: str) -> tuple[float, float]:
+    """CPU and wall seconds of one parse + estimate + JSON (CPU time is what one core spends,
+    unaffected by other processes competing for the machine)."""
+    cpu, wall = time.process_time(), time.perf_counter()
+    timed_run(text, method)
+    return time.process_time() - cpu, time.perf_counter() - wall
+
+
 def speed_table(quick: bool) -> list[list[str]]:
     rows = []
     for k, clutter in ((10, 0.0), (100, 0.0), (1000, 0.0), (1000, 0.2)):
@@ -137,8 +145,9 @@ def speed_table(quick: bool) -> list[list[str]]:
         text = json.dumps(sim.input)
         cells = [f"{k}" + (" (20 % clutter)" if clutter else "")]
         for method in METHODS:
-            reps = 1 if quick else 3
-            cells.append(f"{min(timed_run(text, method)[1] for _ in range(reps)):.3f} s")
+            runs = [cpu_run(text, method) for _ in range(1 if quick else 3)]
+            cpu, wall = min(r[0] for r in runs), min(r[1] for r in runs)
+            cells.append(f"{cpu:.3f} s ({wall:.3f} s)")
         goal = {10: 0.1, 100: 0.3, 1000: 2.0}[k] if not clutter else 3.0
         cells.append(f"<= {goal} s")
         rows.append(cells)
@@ -251,7 +260,7 @@ def main() -> None:
     ]
     text += "\n\n## Track fits (ours; tracks of one true target over all 10 frames; position at t_ref)\n\n"
     text += markdown(["case", "tracks", "ratio RMS (goal <= 0.41)", "ratio max", "NEES/3"], track_rows)
-    text += "\n\n## Speed (swarm, 10 frames, one core, parse + estimate + JSON)\n\n"
+    text += "\n\n## Speed (swarm, 10 frames, one core, parse + estimate + JSON; CPU time (wall time))\n\n"
     text += markdown(["targets", *METHODS, "goal (ours)"], speed) + "\n"
     print(text)
     (OUT / "bearings.md").write_text(text)
