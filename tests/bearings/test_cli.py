@@ -37,7 +37,7 @@ def test_cli_estimate_json_prints_one_document_and_writes_a_report(tmp_path: Pat
     assert doc["status"] == "succeeded" and len(doc["frames"]) == 3
     assert doc["summary"]["targets"] == sum(len(f["targets"]) for f in doc["frames"])
     text = report.read_text()
-    assert "bearings-3d" in text and "Unassociated" in text
+    assert "bearings-3d" in text and "Unassociated" in text and "<h2>Tracks</h2>" in text
 
 
 def test_cli_estimate_paper_method(tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ MAX_TABLE_ROWS = 300
 
 def build_report(inp: BearingsInput, result: dict[str, Any], *, title: str) -> str:
     """The whole HTML page."""
-    sections = [_summary(inp, result), _figure(inp, result), _tables(inp, result)]
+    sections = [_summary(inp, result), _figure(inp, result), _tracks(result), _tables(inp, result)]
     return page(title, sections)
 
 
@@ -151,6 +151,35 @@ def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
         "the middle of the baseline, in the job frame's axes.</p>"
     )
     return "<h2>Geometry</h2>" + note + figure_html(fig, "bearings-3d")
+
+
+def _tracks(result: dict[str, Any]) -> str:
+    tracks = result.get("tracks", [])
+    if not tracks:
+        return ""
+    rows = []
+    for tr in tracks[:MAX_TABLE_ROWS]:
+        sigma = np.sqrt(np.abs(np.diag(np.asarray(tr["cov_m2"]))))
+        speed = float(np.linalg.norm(tr["velocity_m_s"]))
+        rows.append(
+            [
+                tr["id"],
+                str(len(tr["frames"])),
+                tr["model"],
+                f"{tr['t_ref']:.3f}",
+                ", ".join(f"{x:.2f}" for x in tr["position_m"]),
+                ", ".join(f"{x:.2f}" for x in sigma),
+                f"{speed:.2f}",
+                f"{tr['chi2']:.1f} / {tr['dof']}",
+            ]
+        )
+    note = (
+        "<p class='note'>Each track's motion fitted through its fixes (weighted least squares); position and its "
+        "1-sigma at t_ref. chi2 / dof near 1 means the fixes agree with the model and their covariances.</p>"
+    )
+    header = ["track", "fixes", "model", "t_ref (s)", "position (m)", "sigma (m)", "speed (m/s)", "chi2 / dof"]
+    more = f"<p class='note'>({len(tracks) - MAX_TABLE_ROWS} more left out)</p>" if len(tracks) > MAX_TABLE_ROWS else ""
+    return "<h2>Tracks</h2>" + note + table_html(header, rows) + more
 
 
 def _tables(inp: BearingsInput, result: dict[str, Any]) -> str:
