@@ -31,6 +31,7 @@ def estimate(
 ) -> dict[str, Any]:
     """The ``tumblescan.bearings.result/1`` document (status ``succeeded``) for a validated input."""
     options = options or EstimateOptions()
+    _load_libraries(inp.frame)
     start = time.perf_counter()
     warnings: list[str] = []
     # 1. Associate and triangulate each frame.
@@ -79,6 +80,15 @@ def estimate(
         "total": 1e3 * (time.perf_counter() - start),
     }
     return doc
+
+
+def _load_libraries(frame: str) -> None:
+    """Import the libraries the steps use lazily, so ``timings_ms`` measures the work alone."""
+    import importlib
+
+    for name in ("scipy.optimize", "scipy.sparse.csgraph", "scipy.spatial", "pymap3d" if frame == "ecef" else ""):
+        if name:
+            importlib.import_module(name)
 
 
 def _frames_ml(inp: BearingsInput, options: EstimateOptions, progress: Progress) -> list[FrameFixes]:
