@@ -91,3 +91,20 @@ def test_a_too_large_input_is_refused(http: httpx.Client, tmp_path: Path) -> Non
     r = http.post("/v1/jobs", json={"kind": "bearings", "input": big})
     assert r.status_code in (413, 422), r.text
     assert r.json()["detail"]["code"] == "too_large"
+
+
+def test_cli_submit_uploads_a_bearings_input_and_waits(url: str, tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    path = tmp_path / "input.json"
+    path.write_text(json.dumps(SIM.input))
+    proc = subprocess.run(
+        [sys.executable, "-m", "tumblescan", "submit", "--kind", "bearings", f"input={path}", "--wait", "--url", url],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = ClientResult.model_validate_json(proc.stdout)
+    assert result.status == "succeeded" and len(result.frames) == 4
