@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .common import input_errors
+from .common import input_errors, json_stdout
 
 app = typer.Typer(
     add_completion=False,
@@ -72,15 +72,16 @@ def estimate(
         raise typer.BadParameter(f"{method!r} is not 'ml' or 'paper'", param_hint="--method")
     options = EstimateOptions(method=method, gate_chi2=gate_chi2, link_tracks=tracks)
     try:
-        inp, result = estimate_file(input_file, options)
+        with json_stdout(as_json):
+            inp, result = estimate_file(input_file, options)
+            if out is not None:
+                write_json(out, result)
+            if report is not None:
+                write_report(report, inp, result, title=f"Bearings: {input_file.name}")
     except InputError as exc:
         if as_json:
             sys.stdout.write(json.dumps(failure_document(exc.code, str(exc), exc.field)) + "\n")
         raise
-    if out is not None:
-        write_json(out, result)
-    if report is not None:
-        write_report(report, inp, result, title=f"Bearings: {input_file.name}")
     if as_json:
         sys.stdout.write(json.dumps(result) + "\n")
         return
