@@ -150,8 +150,20 @@ def speed_table(quick: bool) -> list[list[str]]:
             cells.append(f"{cpu:.3f} s ({wall:.3f} s)")
         goal = {10: 0.1, 100: 0.3, 1000: 2.0}[k] if not clutter else 3.0
         cells.append(f"<= {goal} s")
+        cells.append(f"{peak_mib(text):.0f} MiB")
         rows.append(cells)
     return rows
+
+
+def peak_mib(text: str) -> float:
+    """Peak memory Python and NumPy allocate for one run of ours (tracemalloc)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    timed_run(text, "ours (ML + multi-frame)")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2**20
 
 
 def markdown(header: list[str], rows: list[list[str]]) -> str:
@@ -198,7 +210,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.speed:
         with threadpool_limits(1):
-            print(markdown(["targets", *METHODS, "goal (ours)"], speed_table(quick=False)))
+            print(markdown(["targets", *METHODS, "goal (ours)", "peak memory (ours)"], speed_table(quick=False)))
         return
     OUT.mkdir(parents=True, exist_ok=True)
     header = [
@@ -264,7 +276,7 @@ def main() -> None:
     text += "\n\n## Track fits (ours; tracks of one true target over all 10 frames; position at t_ref)\n\n"
     text += markdown(["case", "tracks", "ratio RMS (goal <= 0.41)", "ratio max", "NEES/3"], track_rows)
     text += "\n\n## Speed (swarm, 10 frames, one core, parse + estimate + JSON; CPU time (wall time))\n\n"
-    text += markdown(["targets", *METHODS, "goal (ours)"], speed) + "\n"
+    text += markdown(["targets", *METHODS, "goal (ours)", "peak memory (ours)"], speed) + "\n"
     print(text)
     (OUT / "bearings.md").write_text(text)
     plot(points, OUT / "bearings_error_vs_bound.png")
