@@ -1,9 +1,10 @@
 """Estimate every target's position, frame by frame, from two stations' bearings.
 
 The recipe (``method="ml"``): per frame, candidate pairs by the epipolar angle, the χ² gate,
-ML triangulation and a one-to-one assignment that may leave detections unassociated; then the
-fixes are linked into tracks. ``method="paper"`` runs the paper's Δh matching and Mean Shift
-correction instead, on the same input and into the same document.
+ML triangulation and a one-to-one assignment that may leave detections unassociated; ambiguous
+frames re-assigned with the pairs other frames support (station angle tracks); then the fixes
+are linked into tracks and each track's motion is fitted. ``method="paper"`` runs the paper's
+Δh matching and Mean Shift correction instead, on the same input and into the same document.
 """
 
 from __future__ import annotations
