@@ -27,10 +27,11 @@ test: lint
 	$(BIN)/python -m pytest -q
 
 bench: install
-	$(BIN)/python -m bench.accuracy
-	$(BIN)/python -m bench.solvers
-	$(BIN)/python -m bench.speed
-	$(BIN)/python -m bench.service
+	$(BIN)/python -m bench.linescan.accuracy
+	$(BIN)/python -m bench.linescan.solvers
+	$(BIN)/python -m bench.linescan.speed
+	$(BIN)/python -m bench.service.round_trip
+	$(BIN)/python -m bench.service.startup
 
 clean:
 	rm -rf $(VENV) demo-output bench/out .pytest_cache .mypy_cache .ruff_cache

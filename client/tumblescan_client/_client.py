@@ -12,72 +12,26 @@ from typing import Any
 
 import httpx
 
+from ._requests import (
+    DEFAULT_KIND,
+    DEFAULT_TIMEOUT,
+    Files,
+    PathLike,
+    Progress,
+    close_parts,
+    configure,
+    create_body,
+    long_poll_hold,
+    next_poll,
+    open_parts,
+    retry_delay,
+    transport_error,
+    typed_result,
+    upload_request,
+)
 from ._retry import RetryPolicy
-from .errors import APIConnectionError, APITimeoutError, JobFailedError, WaitTimeoutError, error_for
-from .models import Job, JobPage, MotionResult
-
-DEFAULT_URL = "http://127.0.0.1:8000"
-DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
-Progress = Callable[[Job], None]
-
-
-def _configure(
-    base_url: str | None, api_key: str | None, max_retries: int, retry: RetryPolicy | None
-) -> tuple[str, dict[str, str], RetryPolicy]:
-    """Base URL, headers and retry policy, from the arguments or the environment."""
-    url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
-    key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
-    headers = {"User-Agent": "tumblescan-client/0.1"}
-    if key:
-        headers["Authorization"] = f"Bearer {key}"
-    return url, headers, retry or RetryPolicy(max_retries=max_retries)
-
-
-def _transport_error(exc: httpx.TransportError) -> Exception:
-    if isinstance(exc, httpx.TimeoutException):
-        return APITimeoutError(f"request timed out: {exc}")
-    return APIConnectionError(f"cannot reach the service: {exc}")
-
-
-def _retry_delay(policy: RetryPolicy, attempt: int, resp: httpx.Response | None, error: Exception | None) -> float:
-    """Seconds to wait before the next try; raises the final error when none is left."""
-    if not policy.should_retry(attempt, resp):
-        if resp is not None:
-            raise error_for(resp)
-        assert error is not None
-        raise error
-    return policy.delay(attempt, resp)
-
-
-def _upload_parts(
-    path: str | os.PathLike[str],
-    extra: dict[str, str | os.PathLike[str] | None],
-    options: dict[str, Any] | None,
-    kind: str,
-) -> tuple[dict[str, Any], dict[str, str]]:
-    """Multipart parts: ``file`` plus any of ``cloud``/``truth``; the caller closes the files."""
-    named = {"file": path} | {k: v for k, v in extra.items() if v is not None}
-    files = {k: (Path(v).name, open(v, "rb"), "application/octet-stream") for k, v in named.items()}  # noqa: SIM115
-    return files, {"options": json.dumps(options or {}), "kind": kind}
-
-
-def _close(files: dict[str, Any]) -> None:
-    for _, fh, _ in files.values():
-        fh.close()
-
-
-def _next_poll(delay: float) -> float:
-    return min(delay * 1.5, 2.0)
-
-
-LONG_POLL_S = 10.0
-
-
-def _hold(deadline: float | None) -> float:
-    """How long the service may hold one long-poll request."""
-    if deadline is None:
-        return LONG_POLL_S
-    return round(max(0.0, min(LONG_POLL_S, deadline - time.monotonic())), 3)
+from .errors import WaitTimeoutError
+from .models import Artifact, Job, JobPage, Kind, KindSummary
 
 
 class Jobs:
@@ -88,33 +42,44 @@ class Jobs:
 
     def create(
         self,
+        kind: str = DEFAULT_KIND,
+        input: dict[str, Any] | None = None,
         *,
-        tracks: dict[str, Any],
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        tracks: dict[str, Any] | None = None,
         timeout: float | None = None,
     ) -> Job:
-        body = {"kind": kind, "input": {"tracks": tracks}, "options": options or {}}
+        """Queue a job from JSON input (``client.kinds.get(kind)`` tells which forms take JSON)."""
+        body = create_body(kind, input, tracks, options)
         return Job.model_validate(self._c._request("POST", "/v1/jobs", json=body, timeout=timeout).json())
 
     def upload(
         self,
-        path: str | os.PathLike[str],
+        kind: str | os.PathLike[str],
+        files: Files | None = None,
         *,
-        cloud: str | os.PathLike[str] | None = None,
-        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        cloud: PathLike | None = None,
+        truth: PathLike | None = None,
         timeout: float | None = None,
+        **legacy: Any,
     ) -> Job:
+        """Queue a job from files: ``upload("panel-axis", files={"meta": "meta.json", "image": "img.png"})``;
+        a part may take several files (a list). ``upload(path, cloud=..., truth=...)`` still works
+        for linescan-motion."""
+        kind_name, parts = upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        if legacy:
+            raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
+
         def send() -> httpx.Response:
-            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
+            opened = open_parts(parts)
+            data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return self._c._http.request(
-                    "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
+                    "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(files)
+                close_parts(opened)
 
         return Job.model_validate(self._c._send(send).json())
 
@@ -127,7 +92,7 @@ class Jobs:
         deadline = None if timeout is None else time.monotonic() + timeout
         delay = 0.01
         while True:
-            job = self._get_waiting(job_id, _hold(deadline))
+            job = self._get_waiting(job_id, long_poll_hold(deadline))
             if on_progress:
                 on_progress(job)
             if job.done:
@@ -135,18 +100,27 @@ class Jobs:
             if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             time.sleep(delay)
-            delay = _next_poll(delay)
+            delay = next_poll(delay)
 
     def _get_waiting(self, job_id: str, hold_s: float) -> Job:
         resp = self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold_s}, timeout=hold_s + 30)
         return Job.model_validate(resp.json())
 
-    def result(self, job_id: str, *, timeout: float | None = 600.0) -> MotionResult:
-        """Wait for the job and return its typed motion result (JobFailedError otherwise)."""
-        job = self.wait(job_id, timeout=timeout)
-        if job.status != "succeeded" or job.result is None:
-            raise JobFailedError(job)
-        return MotionResult.model_validate(job.result)
+    def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
+        """Wait for the job and return its result, typed by its kind (``MotionResult`` for
+        linescan-motion; see ``tumblescan_client.results``); JobFailedError otherwise."""
+        return typed_result(self.wait(job_id, timeout=timeout))
+
+    def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
+        """The files a succeeded job has (its kind's artifacts and its report)."""
+        resp = self._c._request("GET", f"/v1/jobs/{job_id}/artifacts", timeout=timeout)
+        return [Artifact.model_validate(a) for a in resp.json()]
+
+    def download_artifact(
+        self, job_id: str, name: str, path: str | os.PathLike[str], *, timeout: float | None = None
+    ) -> Path:
+        """Stream one artifact of a succeeded job to ``path``."""
+        return self._download(f"/v1/jobs/{job_id}/artifacts/{name}", {}, path, timeout)
 
     def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
@@ -197,6 +171,32 @@ class Jobs:
             cursor = page.next_cursor
 
 
+class Kinds:
+    """``client.kinds``: the job kinds the service runs, with their input forms and schemas."""
+
+    def __init__(self, client: Client) -> None:
+        self._c = client
+
+    def list(self) -> list[KindSummary]:
+        return [KindSummary.model_validate(k) for k in self._c._request("GET", "/v1/kinds").json()]
+
+    def get(self, name: str) -> Kind:
+        return Kind.model_validate(self._c._request("GET", f"/v1/kinds/{name}").json())
+
+
+class AsyncKinds:
+    """``async_client.kinds``: the same as :class:`Kinds`, awaitable."""
+
+    def __init__(self, client: AsyncClient) -> None:
+        self._c = client
+
+    async def list(self) -> list[KindSummary]:
+        return [KindSummary.model_validate(k) for k in (await self._c._request("GET", "/v1/kinds")).json()]
+
+    async def get(self, name: str) -> Kind:
+        return Kind.model_validate((await self._c._request("GET", f"/v1/kinds/{name}")).json())
+
+
 class Client:
     """Synchronous client. ``api_key`` defaults to ``TUMBLESCAN_API_KEY``, ``base_url`` to
     ``TUMBLESCAN_URL`` or http://127.0.0.1:8000."""
@@ -211,9 +211,10 @@ class Client:
         retry: RetryPolicy | None = None,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
-        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        url, headers, self.retry = configure(base_url, api_key, max_retries, retry)
         self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = Jobs(self)
+        self.kinds = Kinds(self)
 
     def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
         return self._send(lambda: self._http.request(method, path, timeout=timeout or httpx.USE_CLIENT_DEFAULT, **kw))
@@ -224,10 +225,10 @@ class Client:
             try:
                 resp, error = send(), None
             except httpx.TransportError as exc:
-                resp, error = None, _transport_error(exc)
+                resp, error = None, transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            time.sleep(_retry_delay(self.retry, attempt, resp, error))
+            time.sleep(retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     def close(self) -> None:
@@ -248,33 +249,40 @@ class AsyncJobs:
 
     async def create(
         self,
+        kind: str = DEFAULT_KIND,
+        input: dict[str, Any] | None = None,
         *,
-        tracks: dict[str, Any],
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        tracks: dict[str, Any] | None = None,
         timeout: float | None = None,
     ) -> Job:
-        body = {"kind": kind, "input": {"tracks": tracks}, "options": options or {}}
+        body = create_body(kind, input, tracks, options)
         return Job.model_validate((await self._c._request("POST", "/v1/jobs", json=body, timeout=timeout)).json())
 
     async def upload(
         self,
-        path: str | os.PathLike[str],
+        kind: str | os.PathLike[str],
+        files: Files | None = None,
         *,
-        cloud: str | os.PathLike[str] | None = None,
-        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        cloud: PathLike | None = None,
+        truth: PathLike | None = None,
         timeout: float | None = None,
+        **legacy: Any,
     ) -> Job:
+        kind_name, parts = upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        if legacy:
+            raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
+
         async def send() -> httpx.Response:
-            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
+            opened = open_parts(parts)
+            data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return await self._c._http.request(
-                    "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
+                    "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(files)
+                close_parts(opened)
 
         return Job.model_validate((await self._c._send(send)).json())
 
@@ -285,7 +293,7 @@ class AsyncJobs:
         deadline = None if timeout is None else time.monotonic() + timeout
         delay = 0.01
         while True:
-            hold = _hold(deadline)
+            hold = long_poll_hold(deadline)
             resp = await self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold}, timeout=hold + 30)
             job = Job.model_validate(resp.json())
             if on_progress:
@@ -295,13 +303,19 @@ class AsyncJobs:
             if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             await asyncio.sleep(delay)
-            delay = _next_poll(delay)
+            delay = next_poll(delay)
 
-    async def result(self, job_id: str, *, timeout: float | None = 600.0) -> MotionResult:
-        job = await self.wait(job_id, timeout=timeout)
-        if job.status != "succeeded" or job.result is None:
-            raise JobFailedError(job)
-        return MotionResult.model_validate(job.result)
+    async def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
+        return typed_result(await self.wait(job_id, timeout=timeout))
+
+    async def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
+        resp = await self._c._request("GET", f"/v1/jobs/{job_id}/artifacts", timeout=timeout)
+        return [Artifact.model_validate(a) for a in resp.json()]
+
+    async def download_artifact(
+        self, job_id: str, name: str, path: str | os.PathLike[str], *, timeout: float | None = None
+    ) -> Path:
+        return await self._download(f"/v1/jobs/{job_id}/artifacts/{name}", {}, path, timeout)
 
     async def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
@@ -365,9 +379,10 @@ class AsyncClient:
         retry: RetryPolicy | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        url, headers, self.retry = configure(base_url, api_key, max_retries, retry)
         self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = AsyncJobs(self)
+        self.kinds = AsyncKinds(self)
 
     async def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
         async def send() -> httpx.Response:
@@ -381,10 +396,10 @@ class AsyncClient:
             try:
                 resp, error = await send(), None
             except httpx.TransportError as exc:
-                resp, error = None, _transport_error(exc)
+                resp, error = None, transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            await asyncio.sleep(_retry_delay(self.retry, attempt, resp, error))
+            await asyncio.sleep(retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     async def close(self) -> None:

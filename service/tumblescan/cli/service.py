@@ -7,19 +7,23 @@ import logging
 import os
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from ..settings import Settings
+from .common import fail
+
+if TYPE_CHECKING:
+    from ..settings import Settings
 
 
 def _settings(**overrides: Any) -> Settings:
+    from ..settings import Settings
+
     return Settings(**{k: v for k, v in overrides.items() if v is not None})
 
 
@@ -31,8 +35,8 @@ def register(app: typer.Typer) -> None:
     app.command()(serve)
     app.command()(worker)
     app.command()(submit)
+    app.command()(kinds)
     app.command()(report)
-    app.command()(demo)
 
 
 def serve(
@@ -83,6 +87,7 @@ def worker(
     overrides = {"workers": workers, "data_dir": data_dir, "redis_url": redis_url, "database_url": database_url}
     s = _settings(**overrides)
     huey, _ = make_huey(s)
+    _announce(s, f"{socket.gethostname()}-{os.getpid()}")
     # This process forks the worker processes (now and whenever one dies), so it must never
     # hold the job store open: SQLite's lock bookkeeping does not survive a fork. Heartbeat
     # and reaper run in a separate, spawned process.
@@ -103,6 +108,19 @@ def worker(
     finally:
         housekeeper.terminate()
         housekeeper.join(timeout=10)
+
+
+def _announce(s: Settings, worker_id: str) -> None:
+    """The first worker heartbeat, before the consumer starts (the housekeeper's first beat
+    comes seconds later, after its imports), so /readyz says ready as soon as jobs can be
+    taken. The store is closed again: this process forks the workers."""
+    from ..jobs.store import JobStore
+
+    store = JobStore(s.db_url)
+    try:
+        store.worker_heartbeat(worker_id, socket.gethostname(), s.workers)
+    finally:
+        store.close()
 
 
 def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
@@ -136,30 +154,31 @@ def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
 
 
 def submit(
-    file: Annotated[Path, typer.Argument(help="tracks (JSON or CSV) or dense frames (PLY or NPZ)")],
-    cloud: Annotated[Path | None, typer.Option(help="PLY with per-point times to rectify")] = None,
+    files: Annotated[list[str], typer.Argument(help="FILE or PART=FILE; bare files go to the kind's first part")],
+    kind: Annotated[str, typer.Option(help="the job kind ('tumblescan kinds' lists them)")] = "linescan-motion",
+    cloud: Annotated[Path | None, typer.Option(help="linescan-motion: PLY with per-point times to rectify")] = None,
     truth: Annotated[Path | None, typer.Option(help="truth.json of a simulation, shown in the report")] = None,
     options: Annotated[str, typer.Option(help="job options as JSON")] = "{}",
     wait: Annotated[bool, typer.Option("--wait", help="wait for the result with a progress bar")] = False,
-    out: Annotated[Path | None, typer.Option(help="with --wait: write the rectified cloud here")] = None,
+    out: Annotated[Path | None, typer.Option(help="with --wait: write the rectified cloud (linescan) here")] = None,
+    artifacts: Annotated[
+        Path | None, typer.Option(help="with --wait: download every artifact into this folder")
+    ] = None,
     url: Annotated[str | None, typer.Option(help="service URL (TUMBLESCAN_URL)")] = None,
     api_key: Annotated[str | None, typer.Option(help="API key (TUMBLESCAN_API_KEY)")] = None,
     timeout: Annotated[float, typer.Option(help="seconds to wait")] = 600.0,
 ) -> None:
-    """Submit a job to a running service; print the job, or with --wait its result."""
+    """Submit a job of any kind to a running service; print the job, or with --wait its result."""
     from tumblescan_client import Client, TumblescanError
 
     try:
         opts = json.loads(options)
     except json.JSONDecodeError as exc:
-        typer.echo(f"error: --options is not valid JSON: {exc.msg}", err=True)
-        raise typer.Exit(2) from None
-    if not file.is_file():
-        typer.echo(f"error: no such file: {file}", err=True)
-        raise typer.Exit(2)
+        raise fail(f"--options is not valid JSON: {exc.msg}") from None
     try:
         with Client(url, api_key=api_key) as client:
-            job = client.jobs.upload(file, cloud=cloud, truth=truth, options=opts)
+            parts = _parts(files, client.kinds.get(kind).upload_parts(), {"cloud": cloud, "truth": truth})
+            job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
                 return
@@ -175,9 +194,63 @@ def submit(
             if out is not None and job.artifacts.cloud:
                 client.jobs.download_cloud(job.id, out)
                 typer.echo(f"wrote {out}", err=True)
+            if artifacts is not None:
+                artifacts.mkdir(parents=True, exist_ok=True)
+                for a in client.jobs.artifacts(job.id):
+                    target = client.jobs.download_artifact(job.id, a.name, artifacts / _artifact_file(a))
+                    typer.echo(f"wrote {target}", err=True)
     except TumblescanError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2 if getattr(exc, "status_code", 0) in (400, 404, 413, 422) else 1) from None
+        raise typer.Exit(_client_error(exc)) from None
+
+
+def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
+    """Files by upload part: ``PART=FILE`` names its part, a bare file goes to the first part."""
+    parts: dict[str, list[Path]] = {}
+    for arg in args:
+        name, sep, rest = arg.partition("=")
+        part, path = (name, Path(rest)) if sep and name in known else (known[0], Path(arg))
+        parts.setdefault(part, []).append(path)
+    for name, given in named.items():
+        if given is not None:
+            parts.setdefault(name, []).append(given)
+    for paths in parts.values():
+        for path in paths:
+            if not path.is_file():
+                raise fail(f"no such file: {path}")
+    return parts
+
+
+def _artifact_file(artifact: Any) -> str:
+    suffix = {"text/html": ".html", "application/json": ".json", "image/png": ".png"}.get(artifact.media_type, "")
+    return artifact.name + ("" if "." in artifact.name else suffix or ".bin")
+
+
+def _client_error(exc: Exception) -> int:
+    """One line on stderr; exit 2 for what the caller got wrong, 1 for the service's trouble."""
+    typer.echo(f"error: {exc}", err=True)
+    return 2 if getattr(exc, "status_code", 0) in (400, 404, 409, 413, 422) else 1
+
+
+def kinds(as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False) -> None:
+    """List the job kinds this installation runs, with their input forms."""
+    from ..jobs.registry import kinds as registered
+
+    if as_json:
+        listing = [
+            {"name": k.name, "title": k.title, "forms": [_form_summary(f) for f in k.forms]}
+            for k in registered().values()
+        ]
+        typer.echo(json.dumps(listing, indent=2))
+        return
+    for k in registered().values():
+        typer.echo(f"{k.name}: {k.title}")
+        for f in k.forms:
+            via = " (or JSON input)" if f.json_input else ""
+            typer.echo(f"    {f.name}: upload {', '.join(p.name for p in f.parts)}{via}")
+
+
+def _form_summary(form: Any) -> dict[str, Any]:
+    return {"name": form.name, "parts": [p.name for p in form.parts], "json_input": form.json_input}
 
 
 class ProgressBar:
@@ -206,113 +279,5 @@ def report(
         with Client(url, api_key=api_key) as client:
             client.jobs.download_report(job_id, out)
     except TumblescanError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2 if getattr(exc, "status_code", 0) in (404, 409, 422) else 1) from None
+        raise typer.Exit(_client_error(exc)) from None
     typer.echo(f"wrote {out}")
-
-
-def demo(
-    out: Annotated[Path, typer.Option(help="where the demo writes its files")] = Path("demo-output"),
-    seed: Annotated[int, typer.Option(min=0)] = 7,
-    port: Annotated[int, typer.Option(help="0: any free port")] = 0,
-    keep_serving: Annotated[bool, typer.Option(help="keep the service running afterwards (Ctrl-C stops it)")] = False,
-) -> None:
-    """Start the service on the embedded defaults, simulate a tumbling satellite, submit it,
-    wait with a progress bar, print the estimate next to the truth, write the rectified cloud."""
-    import numpy as np
-
-    from tumblescan_client import Client
-
-    from ..cloud_io import TimedCloud, read_ply, write_ply
-    from ..report_text import comparison_table
-    from ..result import MotionResult
-    from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
-    from ..tracks_io import write_tracks
-    from ..truth import motion_to_json
-
-    out.mkdir(parents=True, exist_ok=True)
-    port = port or _free_port()
-    url = f"http://127.0.0.1:{port}"
-    typer.echo(f"starting the service at {url} (data in {out / 'data'})...")
-    server = _start_server(port, out / "data", out / "service.log")
-    try:
-        _wait_ready(url, server, timeout_s=120)
-        rng = np.random.default_rng(seed)
-        motion = random_motion(rng)
-        scene = Scene()
-        typer.echo(f"simulating {scene.frames} frames of a 14.4 m satellite at 50 m (Table 1 scanner, seed {seed})...")
-        tracks, _ = simulate_tracks(motion, scene, seed=seed)
-        cloud = simulate_frames(motion, scene, seed=seed)
-        write_tracks(out / "tracks.json", tracks)
-        write_ply(out / "frames.ply", TimedCloud(cloud.xyz_m, cloud.t_s, {"frame": cloud.frame, "line": cloud.line}))
-        (out / "truth.json").write_text(json.dumps({"motion": motion_to_json(motion), "seed": seed}, indent=2))
-        with Client(url) as client:
-            job = client.jobs.upload(
-                out / "tracks.json", cloud=out / "frames.ply", truth=out / "truth.json", options={"seed": seed}
-            )
-            typer.echo(f"submitted job {job.id}")
-            job = client.jobs.wait(job.id, timeout=600, on_progress=ProgressBar())
-            typer.echo("")
-            if job.status != "succeeded" or job.result is None:
-                typer.echo(f"error: job {job.status}: {job.error}", err=True)
-                raise typer.Exit(1)
-            result = MotionResult.model_validate(job.result)
-            client.jobs.download_cloud(job.id, out / "rectified.ply")
-            client.jobs.download_report(job.id, out / "report.html")
-        (out / "result.json").write_text(result.model_dump_json(indent=2))
-        typer.echo(comparison_table(result, motion))
-        rect = read_ply(out / "rectified.ply")
-        T = result.reference_time_s
-        true_rect = motion.position(cloud.reference_m, np.full(len(cloud.t_s), T))
-        err_mm = 1000 * float(np.linalg.norm(rect.xyz_m - true_rect, axis=1).mean())
-        verdict = "passed" if result.validation.passed else "FAILED"
-        typer.echo(f"\nvalidation {verdict}; solver {result.solver.path}, {result.solver.elapsed_s * 1000:.0f} ms")
-        typer.echo(
-            f"rectified {len(rect)} points to t={T:.4f} s: mean distance to the true undistorted cloud "
-            f"{err_mm:.1f} mm (2 cm sensor noise included)"
-        )
-        typer.echo(f"wrote {out / 'rectified.ply'}, {out / 'result.json'}, {out / 'tracks.json'}, {out / 'frames.ply'}")
-        typer.echo(f"report: {url}/jobs/{job.id} (written to {out / 'report.html'})")
-        if keep_serving:
-            typer.echo(f"serving at {url} (job list at {url}/); Ctrl-C stops")
-            server.wait()
-        else:
-            typer.echo("the service stops with the demo; --keep-serving keeps it up to browse the report there")
-    finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            server.kill()
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _start_server(port: int, data_dir: Path, log_path: Path) -> subprocess.Popen[bytes]:
-    env = dict(
-        os.environ, TUMBLESCAN_DATA_DIR=str(data_dir.resolve()), TUMBLESCAN_PORT=str(port), TUMBLESCAN_HOST="127.0.0.1"
-    )
-    log = open(log_path, "ab")  # noqa: SIM115 (the server process owns it)
-    return subprocess.Popen(
-        [sys.executable, "-m", "tumblescan", "serve"], env=env, stdout=log, stderr=subprocess.STDOUT
-    )
-
-
-def _wait_ready(url: str, server: subprocess.Popen[bytes], timeout_s: float) -> None:
-    import httpx
-
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if server.poll() is not None:
-            raise RuntimeError(f"the service exited with code {server.returncode}; see its log")
-        try:
-            if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.2)
-    raise RuntimeError(f"the service at {url} was not ready within {timeout_s} s")
