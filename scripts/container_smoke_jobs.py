@@ -33,10 +33,10 @@ class Job:
 
 @dataclass(frozen=True)
 class Recipe:
-    """How to make a kind's input with the image's own CLI (run in an empty directory, which
-    ``{out}`` names) and which jobs to submit from it."""
+    """How to make a kind's input with the image's own CLI (a command line, split on spaces, that
+    writes into the directory ``{out}`` names) and which jobs to submit from it."""
 
-    simulate: list[str]
+    simulate: str
     jobs: list[Job]
 
 
@@ -44,7 +44,7 @@ class Recipe:
 # the smoke test: add its recipe when registering it (small inputs: this runs in CI).
 RECIPES: dict[str, Recipe] = {
     "linescan-motion": Recipe(
-        simulate=["tumblescan", "simulate", "--out", "{out}", "--lines", "128", "--pixels", "128", "--seed", "3"],
+        simulate="tumblescan linescan-motion simulate --out {out} --lines 128 --pixels 128 --seed 3",
         jobs=[
             Job("tracks", {"file": "tracks.json", "truth": "truth.json"}),
             Job("dense frames", {"file": "frames.ply", "truth": "truth.json"}),
@@ -77,7 +77,7 @@ def main() -> int:
                 recipe = RECIPES[kind]
                 out = Path(tmp) / kind
                 t0 = time.monotonic()
-                cmd = [arg.replace("{out}", str(out)) for arg in recipe.simulate]
+                cmd = [arg.replace("{out}", str(out)) for arg in recipe.simulate.split()]
                 sim = subprocess.run(cmd, capture_output=True, text=True)
                 sim_s = time.monotonic() - t0
                 if sim.returncode != 0:
