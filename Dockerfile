@@ -1,8 +1,10 @@
 # Tumblescan service: API plus embedded workers by default (see compose.yaml for scale-out).
-#   docker run -p 8000:8000 -e TUMBLESCAN_API_KEYS=<key> -v tumblescan:/data tumblescan
+#   docker build -t tumblescan:local .        (or scripts/build-image: podman or docker, proxies, no registry)
+#   docker run -p 8000:8000 -e TUMBLESCAN_API_KEYS=<key> -v tumblescan:/data tumblescan:local
 # It listens on 0.0.0.0 inside the container, so it refuses to start without API keys.
 # Python packages are pinned by constraints.txt (scripts/lock-deps regenerates it); the build context
 # is limited by .dockerignore; scripts/container-smoke builds this image and runs a job of every kind.
+# docs/deploy.md describes the image, its volumes, settings and health checks.
 
 # --- build: a virtualenv with the pinned dependencies, then the two packages (no pip cache, no sources) ---
 FROM python:3.11-slim AS build
@@ -14,7 +16,7 @@ WORKDIR /src
 COPY constraints.txt pyproject.toml ./
 COPY client/pyproject.toml client/
 # A host behind a TLS-inspecting proxy hands its CA bundle in as the build secret pip_cert
-# (scripts/container-smoke does); without it pip uses its own certificates. setuptools (pinned too) is the
+# (scripts/build-image does); without it pip uses its own certificates. setuptools (pinned too) is the
 # build backend of the two packages below, and dash (Open3D's) needs it at run time.
 RUN --mount=type=secret,id=pip_cert \
     if [ -s /run/secrets/pip_cert ]; then export PIP_CERT=/run/secrets/pip_cert; fi \
