@@ -50,6 +50,13 @@ RECIPES: dict[str, Recipe] = {
             Job("dense frames", {"file": "frames.ply", "truth": "truth.json"}),
         ],
     ),
+    "bearings": Recipe(
+        simulate="tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",
+        jobs=[
+            Job("LEO (ECEF)", {"input": "input.json"}),
+            Job("paper method", {"input": "input.json"}, {"method": "paper"}),
+        ],
+    ),
 }
 # Before GET /v1/kinds existed the service ran this kind only.
 KINDS_BEFORE_DISCOVERY = ["linescan-motion"]
