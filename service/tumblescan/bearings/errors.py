@@ -15,3 +15,4 @@ class TooLargeError(InputError):
     """More detections than a job accepts (HTTP 413)."""
 
     code = "too_large"
+    http_status = 413
