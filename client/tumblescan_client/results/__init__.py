@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
+from .bearings import BearingsResult
 from .linescan import MotionResult
 from .panel_axis import PanelAxisResult
 
@@ -11,6 +12,7 @@ from .panel_axis import PanelAxisResult
 RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
     "panel-axis": PanelAxisResult,
+    "bearings": BearingsResult,
 }
 
 
@@ -24,4 +26,4 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "MotionResult", "PanelAxisResult", "UnknownResult", "result_model"]
+__all__ = ["RESULT_MODELS", "BearingsResult", "MotionResult", "PanelAxisResult", "UnknownResult", "result_model"]

@@ -61,6 +61,10 @@ def serve(
     if problem:
         typer.echo(f"error: {problem}", err=True)
         raise typer.Exit(2)
+    from ..preflight import start_up_problem
+
+    if problem := start_up_problem(s):
+        raise fail(problem)
     if not (s.api_keys or s.admin_keys):
         typer.echo(
             f"tumblescan: no API keys configured: anyone who can reach {s.host}:{s.port} may use the service", err=True
@@ -86,6 +90,10 @@ def worker(
     _logging()
     overrides = {"workers": workers, "data_dir": data_dir, "redis_url": redis_url, "database_url": database_url}
     s = _settings(**overrides)
+    from ..preflight import start_up_problem
+
+    if problem := start_up_problem(s):
+        raise fail(problem)
     huey, _ = make_huey(s)
     _announce(s, f"{socket.gethostname()}-{os.getpid()}")
     # This process forks the worker processes (now and whenever one dies), so it must never

@@ -17,12 +17,14 @@ class UnknownKindError(InputError):
 @cache
 def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
+    from .kinds.bearings import Bearings
     from .kinds.linescan import LinescanMotion
     from .kinds.panel_axis import PanelAxis
 
     listed: list[JobKind] = [
         LinescanMotion(),
         PanelAxis(),
+        Bearings(),
     ]
     return {k.name: k for k in listed}
 
