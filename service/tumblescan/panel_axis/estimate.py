@@ -393,14 +393,13 @@ def _panel(
 def _paper_result(
     gray: FloatArray, camera: PinholeCamera, frames: _Frames, options: EstimateOptions, t0: float
 ) -> PanelAxisResult:
+    """The paper's pipeline as a result: the axis without σ, its two edges, L″ when found."""
     pf = estimate_paper(gray, camera, options.min_line_px)
     axis = frames.axis(pf.axis_cam, np.zeros((2, 2)), np.zeros((2, 3)))
     axis.sigma_deg = axis.sigma_pitch_deg = axis.sigma_yaw_deg = None
     axis.cov_tangent_rad2 = axis.tangent_basis_enu = axis.tangent_basis_camera = None
-    uv = camera.project(np.atleast_2d(pf.axis_cam * np.sign(pf.axis_cam[2] or 1.0)))  # direction of the image line
-    seg = pf.edges_px[0]
+    seg = pf.edges_px[0]  # the longest edge gives the in-image angle
     a_img = (seg[2:] - seg[:2]) / np.linalg.norm(seg[2:] - seg[:2])
-    del uv
     mid = (pf.edges_px[:, :2] + pf.edges_px[:, 2:]).mean(axis=0) / 2
     n2 = np.array([-a_img[1], a_img[0]])
     panel = Panel(edges_px=pf.edges_px.tolist(), long_edges=2)
