@@ -30,11 +30,11 @@ from .axis import (
 )
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
-from .frames import R_ecef_from_enu, canonical, pitch_yaw_deg, pitch_yaw_jacobian
-from .meta import MatrixPointing, PanelAxisInput
+from .meta import PanelAxisInput
 from .options import EstimateOptions
+from .outputs import Frames
 from .paper import estimate_paper
-from .result import Axis, Candidate, Direction, Observability, Panel, PanelAxisResult, Segmentation
+from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
 from .weak import best_wing, ippe_candidates, wing_corners
 
@@ -58,7 +58,7 @@ def estimate_axis(
     options = options or EstimateOptions()
     t0 = time.perf_counter()
     camera = meta.pinhole
-    frames = _Frames(meta)
+    frames = Frames(meta)
     if full_scale is None:
         full_scale = 255.0 if gray.max() <= 255 else 65535.0
     if options.method == "paper":
@@ -149,69 +149,6 @@ def estimate_axis(
         warnings=warnings,
         timings_ms={"total": 1000 * (time.perf_counter() - t0)},
     )
-
-
-class _Frames:
-    """Turns camera-frame directions into the input's frames (station ENU, ECEF), signed as lines."""
-
-    def __init__(self, meta: PanelAxisInput) -> None:
-        R = meta.R_cam_from_ref
-        self.R_cam_from_enu: FloatArray | None = None
-        self.R_ecef_from_enu: FloatArray | None = None
-        self.R_cam_from_ecef: FloatArray | None = None
-        if meta.station is not None:
-            self.R_ecef_from_enu = R_ecef_from_enu(meta.station.lat_deg, meta.station.lon_deg)
-        if R is None:
-            return
-        if isinstance(meta.pointing, MatrixPointing) and meta.pointing.frame == "ecef":
-            self.R_cam_from_ecef = R
-            if self.R_ecef_from_enu is not None:
-                self.R_cam_from_enu = R @ self.R_ecef_from_enu
-        else:
-            self.R_cam_from_enu = R
-            if self.R_ecef_from_enu is not None:
-                self.R_cam_from_ecef = R @ self.R_ecef_from_enu.T
-
-    def signed(self, d_cam: FloatArray) -> FloatArray:
-        """``d_cam`` signed as the line's canonical station vector (North >= 0), else camera x >= 0."""
-        d = np.asarray(d_cam, dtype=float) / np.linalg.norm(d_cam)
-        if self.R_cam_from_enu is not None:
-            return d if (self.R_cam_from_enu.T @ d)[1] >= 0 else -d
-        if self.R_cam_from_ecef is not None:
-            return d if (self.R_cam_from_ecef.T @ d)[1] >= 0 else -d
-        return canonical(d, 0)
-
-    def direction(self, d_cam: FloatArray) -> Direction:
-        d = self.signed(d_cam)
-        enu = self.R_cam_from_enu.T @ d if self.R_cam_from_enu is not None else None
-        ecef = self.R_cam_from_ecef.T @ d if self.R_cam_from_ecef is not None else None
-        return Direction(
-            camera=d.tolist(),
-            station_enu=canonical(enu, 1).tolist() if enu is not None else None,
-            ecef=canonical(ecef, 1).tolist() if ecef is not None else None,
-        )
-
-    def axis(self, d_cam: FloatArray, cov: FloatArray, basis_cam: FloatArray) -> Axis:
-        dd = self.direction(d_cam)
-        out = Axis(camera=dd.camera, station_enu=dd.station_enu, ecef=dd.ecef)
-        out.sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
-        out.cov_tangent_rad2 = np.asarray(cov).tolist()
-        out.tangent_basis_camera = np.asarray(basis_cam).tolist()
-        for name, vec, R in (("", dd.station_enu, self.R_cam_from_enu), ("_ecef", dd.ecef, self.R_cam_from_ecef)):
-            if vec is None or R is None:
-                continue
-            L = np.asarray(vec)
-            pitch, yaw = pitch_yaw_deg(L)
-            setattr(out, f"pitch{name}_deg", pitch)
-            setattr(out, f"yaw{name}_deg", yaw)
-            if name == "":
-                basis = np.asarray(basis_cam) @ R  # rows: basis vectors in ENU
-                out.tangent_basis_enu = basis.tolist()
-                J = pitch_yaw_jacobian(L, basis)
-                c = J @ cov @ J.T
-                out.sigma_pitch_deg = float(np.degrees(np.sqrt(max(c[0, 0], 0.0))))
-                out.sigma_yaw_deg = float(np.degrees(np.sqrt(max(c[1, 1], 0.0))))
-        return out
 
 
 def _axis_family(families: list[Family], target: Target, min_line_px: float) -> Family | None:
@@ -312,7 +249,7 @@ def _weak_answer(
     family: Family,
     edges: list[Edge],
     camera: PinholeCamera,
-    frames: _Frames,
+    frames: Frames,
     rng: np.random.Generator,
     options: EstimateOptions,
     warnings: list[str],
@@ -367,7 +304,7 @@ def _panel(
     family: Family,
     short_family: Family | None,
     short_fit: DirectionFit | None,
-    frames: _Frames,
+    frames: Frames,
     corners: FloatArray | None,
 ) -> Panel:
     rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
@@ -391,7 +328,7 @@ def _panel(
 
 
 def _paper_result(
-    gray: FloatArray, camera: PinholeCamera, frames: _Frames, options: EstimateOptions, t0: float
+    gray: FloatArray, camera: PinholeCamera, frames: Frames, options: EstimateOptions, t0: float
 ) -> PanelAxisResult:
     """The paper's pipeline as a result: the axis without σ, its two edges, L″ when found."""
     pf = estimate_paper(gray, camera, options.min_line_px)
