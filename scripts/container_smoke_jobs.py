@@ -50,6 +50,10 @@ RECIPES: dict[str, Recipe] = {
             Job("dense frames", {"file": "frames.ply", "truth": "truth.json"}),
         ],
     ),
+    "panel-axis": Recipe(
+        simulate="tumblescan panel-axis simulate --out {out} --seed 3 --width-px 512 --height-px 384",
+        jobs=[Job("near range", {"meta": "meta.json", "image": "image.png"})],
+    ),
     "bearings": Recipe(
         simulate="tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",
         jobs=[
