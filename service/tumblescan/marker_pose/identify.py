@@ -1,0 +1,383 @@
+"""Per-frame marker identification and pose: which track is which marker, which observations are
+outliers, and each frame's Kabsch pose.
+
+Tracks carry identities between frames; a frame whose tracks do not give 3 consistent markers
+is identified from scratch by its distance signature (triplets of points matched to triplets of
+layout markers, each hypothesis verified on every point). New tracks join the marker they sit on
+after ``CONFIRM_FRAMES`` consistent frames; two points on one marker (a glint starting next to a
+sphere) leave both out of that frame. A frame fails when its chi-square exceeds the gate and no
+single marker explains it (a planar layout cannot localize an out-of-plane error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+
+from .._typing import BoolArray, FloatArray, IntArray
+from .geometry import kabsch
+from .markers_io import MarkerInput
+
+CONFIRM_FRAMES = 2  # a new track is used once it sat on the same marker this many frames in a row
+MISS_FRAMES = 3  # a track that missed its marker this many frames in a row loses its identity
+PREDICT_FRAMES = 5  # a pose this recent predicts where the markers are
+RECENT_FRAMES = 25  # a search result must be within reach of a pose this recent
+STEP_M = 0.02  # how far a marker may move per frame [m] (1 m/s at 50 Hz)
+LIKELIHOOD_RATIO_CHI2 = 2.0 * np.log(100.0)
+MAX_TRIPLETS = 80
+MAX_HYPOTHESES_PER_TRIPLET = 24
+
+# Per-observation status.
+INLIER, REJECTED, CONFLICT, UNASSIGNED = 0, 1, 2, 3
+
+
+@dataclass
+class Gates:
+    """Residual gate [m] and the frame chi-square thresholds by degrees of freedom."""
+
+    sigma_m: float
+    outlier_sigma: float
+    chi2_max: FloatArray  # indexed by dof
+
+    @classmethod
+    def make(cls, sigma_m: float, outlier_sigma: float, max_dof: int = 3 * 300) -> Gates:
+        from scipy.stats import chi2, norm
+
+        alpha = 2.0 * float(norm.sf(outlier_sigma))
+        dof = np.arange(max_dof + 1)
+        thr = np.where(dof > 0, chi2.isf(alpha, np.maximum(dof, 1)), 0.0)
+        return cls(sigma_m, outlier_sigma, np.asarray(thr))
+
+    @property
+    def gate_m(self) -> float:
+        return self.outlier_sigma * self.sigma_m
+
+    def chi2_ok(self, chi2: float, n: int) -> bool:
+        dof = 3 * n - 6
+        return dof <= 0 or chi2 <= self.chi2_max[min(dof, len(self.chi2_max) - 1)]
+
+
+@dataclass
+class Fit:
+    """A frame's rigid fit: pose, which of the given points are inliers, chi-square."""
+
+    R: FloatArray
+    t: FloatArray
+    inlier: BoolArray
+    chi2: float
+    ok: bool
+
+
+def fit_robust(p_body_m: FloatArray, y_m: FloatArray, gates: Gates) -> Fit | None:
+    """Kabsch on the largest set of points within the gate (all of them, or the best consensus of
+    3-point fits), then the frame's chi-square test (one marker may be dropped if it alone explains
+    a failure). None when fewer than 3 points agree."""
+    n = len(y_m)
+    if n < 3:
+        return None
+    R, t = kabsch(p_body_m, y_m)
+    keep = np.linalg.norm(y_m - p_body_m @ R.T - t, axis=1) <= gates.gate_m
+    if not keep.all() and n >= 4:
+        best = keep
+        for c in combinations(range(n), 3):
+            Rc, tc = kabsch(p_body_m[list(c)], y_m[list(c)])
+            k = np.linalg.norm(y_m - p_body_m @ Rc.T - tc, axis=1) <= gates.gate_m
+            if k.sum() > best.sum():
+                best = k
+                if k.sum() == n - 1:
+                    break
+        keep = best
+    for _ in range(n):
+        if keep.sum() < 3:
+            return None
+        R, t = kabsch(p_body_m[keep], y_m[keep])
+        r = np.linalg.norm(y_m - p_body_m @ R.T - t, axis=1)
+        worst = int(np.argmax(np.where(keep, r, -1.0)))
+        if r[worst] <= gates.gate_m:
+            break
+        keep[worst] = False
+    chi2 = float(np.sum(r[keep] ** 2) / gates.sigma_m**2)
+    if gates.chi2_ok(chi2, int(keep.sum())):
+        return Fit(R, t, keep, chi2, True)
+    return _one_out(p_body_m, y_m, keep, gates, R, t, chi2)
+
+
+def _one_out(p: FloatArray, y: FloatArray, keep: BoolArray, gates: Gates, R: FloatArray, t: FloatArray, chi2: float) -> Fit:
+    passing = []
+    idx = np.flatnonzero(keep)
+    if len(idx) >= 4:
+        for j in idx:
+            k = keep.copy()
+            k[j] = False
+            Rj, tj = kabsch(p[k], y[k])
+            c = float(np.sum(np.linalg.norm(y[k] - p[k] @ Rj.T - tj, axis=1) ** 2) / gates.sigma_m**2)
+            if gates.chi2_ok(c, int(k.sum())):
+                passing.append((j, Rj, tj, c))
+    if len(passing) == 1:
+        j, Rj, tj, c = passing[0]
+        k = keep.copy()
+        k[j] = False
+        return Fit(Rj, tj, k, c, True)
+    return Fit(R, t, keep, chi2, False)
+
+
+def search(y_m: FloatArray, layout_m: FloatArray, gates: Gates) -> list[tuple[IntArray, Fit]]:
+    """Identify a frame's points from scratch: the best hypotheses (marker index per point, -1 for
+    none; the fit), all with the same largest number of inliers; one when the frame is unambiguous.
+
+    Triplets of points whose three distances match three layout markers give pose hypotheses;
+    each is scored by how many points land on a marker (then by chi-square)."""
+    from scipy.optimize import linear_sum_assignment
+
+    n, M = len(y_m), len(layout_m)
+    if n < 3 or M < 3:
+        return []
+    tol = gates.gate_m * np.sqrt(2.0)
+    dY = np.linalg.norm(y_m[:, None] - y_m[None], axis=-1)
+    dL = np.linalg.norm(layout_m[:, None] - layout_m[None], axis=-1)
+    compat = np.abs(dY[:, :, None, None] - dL[None, None]) < tol  # (n, n, M, M)
+    triplets = sorted(combinations(range(n), 3), key=lambda c: -_area(y_m[list(c)]))[:MAX_TRIPLETS]
+    found: dict[tuple[int, ...], tuple[int, float, IntArray, Fit]] = {}
+    for i, j, k in triplets:
+        cand = compat[i, j][:, :, None] & compat[j, k][None, :, :] & compat[i, k][:, None, :]
+        for a, b, c in np.argwhere(cand)[:MAX_HYPOTHESES_PER_TRIPLET]:
+            R, t = kabsch(layout_m[[a, b, c]], y_m[[i, j, k]])
+            assign = _nearest(y_m, layout_m @ R.T + t, gates.gate_m, linear_sum_assignment)
+            if np.sum(assign >= 0) < 3:
+                continue
+            used = assign >= 0
+            fit = fit_robust(layout_m[assign[used]], y_m[used], gates)
+            if fit is None or not fit.ok:
+                continue
+            assign[np.flatnonzero(used)[~fit.inlier]] = -1
+            found[tuple(assign.tolist())] = (int(np.sum(assign >= 0)), fit.chi2, assign, fit)
+            if n >= 4 and found[tuple(assign.tolist())][0] >= min(n, M):
+                break
+    if not found:
+        return []
+    top = max(h[0] for h in found.values())
+    return [(h[2], h[3]) for h in sorted(found.values(), key=lambda h: h[1]) if h[0] == top]
+
+
+def _area(p: FloatArray) -> float:
+    return float(np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0])))
+
+
+def _nearest(y_m: FloatArray, q_m: FloatArray, gate_m: float, lsa: object) -> IntArray:
+    d = np.linalg.norm(y_m[:, None] - q_m[None], axis=-1)
+    cost = np.where(d < gate_m, d, 1e6)
+    rows, cols = lsa(cost)  # type: ignore[operator]
+    assign = np.full(len(y_m), -1, dtype=np.int64)
+    good = cost[rows, cols] < 1e6
+    assign[rows[good]] = cols[good]
+    return assign
+
+
+@dataclass
+class Association:
+    """What identification found.
+
+    obs_marker (N,): marker index of each inlier observation (-1 otherwise); obs_status (N,):
+    INLIER, REJECTED (residual or chi-square), CONFLICT (two points on one marker) or UNASSIGNED;
+    R (F, 3, 3), t (F, 3): each frame's Kabsch pose (NaN where none); measured (F,): 3 or more
+    inlier markers and a passing chi-square; chi2 (F,); identity_changes: tracks relabelled."""
+
+    obs_marker: IntArray
+    obs_status: IntArray
+    R: FloatArray
+    t: FloatArray
+    measured: BoolArray
+    chi2: FloatArray
+    identity_changes: int = 0
+    label_disagreements: int = 0
+    searches: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+
+class _Tracks:
+    """Identity state per track: its marker, a pending marker with its streak, its misses."""
+
+    def __init__(self, n: int) -> None:
+        self.marker = np.full(n, -1, dtype=np.int64)
+        self.pending = np.full(n, -1, dtype=np.int64)
+        self.streak = np.zeros(n, dtype=np.int64)
+        self.misses = np.zeros(n, dtype=np.int64)
+        self.last_frame = -(10**9)
+        self.last_R = np.eye(3)
+        self.last_t = np.zeros(3)
+
+
+def associate(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Association:
+    """Identify every frame's markers against ``layout_m`` (M, 3) and fit each frame's pose."""
+    F, N = data.n_frames, len(data.xyz_m)
+    out = Association(
+        obs_marker=np.full(N, -1, dtype=np.int64),
+        obs_status=np.full(N, UNASSIGNED, dtype=np.int64),
+        R=np.full((F, 3, 3), np.nan),
+        t=np.full((F, 3), np.nan),
+        measured=np.zeros(F, dtype=bool),
+        chi2=np.full(F, np.nan),
+    )
+    state = _Tracks(len(data.track_names))
+    starts = np.searchsorted(data.obs_frame, np.arange(F + 1))
+    for f in range(F):
+        idx = np.arange(starts[f], starts[f + 1])
+        if len(idx):
+            _frame(f, idx, data, layout_m, gates, state, out)
+    _label_check(data, out)
+    return out
+
+
+def _frame(
+    f: int, idx: IntArray, data: MarkerInput, L: FloatArray, gates: Gates, st: _Tracks, out: Association
+) -> None:
+    y, tr = data.xyz_m[idx], data.obs_track[idx]
+    # 1. The tracks' identities give a first fit (a marker claimed twice is left out).
+    known = st.marker[tr].copy()
+    claimed = np.bincount(known[known >= 0], minlength=len(L))
+    known[(known >= 0) & (claimed[np.maximum(known, 0)] > 1)] = -1
+    assign = np.full(len(idx), -1, dtype=np.int64)
+    fit = None
+    use = known >= 0
+    if use.sum() >= 3:
+        fit = fit_robust(L[known[use]], y[use], gates)
+        if fit is not None and fit.ok and fit.inlier.sum() >= 3:
+            assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
+        else:
+            fit = None
+    fresh = False
+    if fit is not None and fit.inlier.sum() < use.sum():
+        # A track left out may have swapped identity: the frame's signature may explain more.
+        out.searches += 1
+        better = _choose(search(y, L, gates), np.full(len(idx), -1))
+        if better is not None and np.sum(better[0] >= 0) > fit.inlier.sum():
+            assign, fit = better
+            fresh = True
+    # 2. Without 3 consistent tracks: the points near the markers as a recent pose placed them,
+    #    else identify the frame from scratch by its distance signature (near that recent pose).
+    if fit is None:
+        gap = int(data.frames[f]) - st.last_frame
+        hyps = _predicted(y, L, gates, st, gap) if gap <= PREDICT_FRAMES else []
+        if not hyps:
+            out.searches += 1
+            hyps = [h for h in search(y, L, gates) if gap > RECENT_FRAMES or _near_pose(h[1], st, gap)]
+        chosen = _choose(hyps, st.marker[tr])
+        if chosen is None:
+            _misses(st, tr, assign)
+            return
+        assign, fit = chosen
+        fresh = True
+    # 3. Other points join the marker they sit on (new tracks after a streak); two on one marker: both out.
+    q = L @ fit.R.T + fit.t
+    d = np.linalg.norm(y[:, None] - q[None], axis=-1)
+    near = d < gates.gate_m
+    crowded = near.sum(axis=0) > 1
+    conflict = np.any(near & crowded[None], axis=1)
+    assign[conflict] = -1
+    taken = np.zeros(len(L), dtype=bool)
+    taken[assign[assign >= 0]] = True
+    for i in np.flatnonzero((assign < 0) & ~conflict):
+        m = int(np.argmin(d[i]))
+        if not near[i, m] or taken[m]:
+            continue
+        t_i = tr[i]
+        if fresh or st.marker[t_i] == m:
+            assign[i] = m
+        else:
+            st.streak[t_i] = st.streak[t_i] + 1 if st.pending[t_i] == m else 1
+            st.pending[t_i] = m
+            if st.streak[t_i] >= CONFIRM_FRAMES:
+                assign[i] = m
+        if assign[i] >= 0:
+            taken[m] = True
+    # 4. The frame's final fit and chi-square test over every assigned point.
+    used = assign >= 0
+    final = fit_robust(L[assign[used]], y[used], gates) if used.sum() >= 3 else None
+    status = np.where(conflict, CONFLICT, UNASSIGNED)
+    if final is not None:
+        ui = np.flatnonzero(used)
+        assign[ui[~final.inlier]] = -1
+        status[ui[~final.inlier]] = REJECTED
+        if final.ok and final.inlier.sum() >= 3:
+            out.R[f], out.t[f], out.chi2[f], out.measured[f] = final.R, final.t, final.chi2, True
+            st.last_frame, st.last_R, st.last_t = int(data.frames[f]), final.R, final.t
+            status[assign >= 0] = INLIER
+            out.obs_marker[idx] = assign
+        else:
+            status[used] = REJECTED
+            assign[:] = -1
+    out.obs_status[idx] = status
+    # 5. Identities carried to the next frame.
+    for i in np.flatnonzero(assign >= 0):
+        t_i = tr[i]
+        if st.marker[t_i] >= 0 and st.marker[t_i] != assign[i]:
+            out.identity_changes += 1
+        st.marker[t_i], st.misses[t_i], st.streak[t_i], st.pending[t_i] = assign[i], 0, 0, -1
+    _misses(st, tr, assign)
+
+
+def _predicted(y: FloatArray, L: FloatArray, gates: Gates, st: _Tracks, gap: int) -> list[tuple[IntArray, Fit]]:
+    """The points on the markers as the last measured pose places them (gate widened by the gap)."""
+    from scipy.optimize import linear_sum_assignment
+
+    assign = _nearest(y, L @ st.last_R.T + st.last_t, gates.gate_m + STEP_M * gap, linear_sum_assignment)
+    used = assign >= 0
+    if used.sum() < 3:
+        return []
+    fit = fit_robust(L[assign[used]], y[used], gates)
+    if fit is None or not fit.ok:
+        return []
+    assign[np.flatnonzero(used)[~fit.inlier]] = -1
+    return [(assign, fit)]
+
+
+def _near_pose(fit: Fit, st: _Tracks, gap: int) -> bool:
+    """Whether a pose is within reach of the last measured one ``gap`` frames earlier."""
+    from .geometry import log_so3
+
+    angle = float(np.linalg.norm(log_so3(fit.R @ st.last_R.T)))
+    return angle <= np.radians(10.0 + 3.0 * gap) and float(np.linalg.norm(fit.t - st.last_t)) <= 0.05 + STEP_M * gap
+
+
+def _choose(hyps: list[tuple[IntArray, Fit]], known: IntArray) -> tuple[IntArray, Fit] | None:
+    """One hypothesis, or None when the frame is ambiguous: several hypotheses are kept only if
+    exactly one agrees with the tracks' identities; relabelling a track needs 4 or more inliers."""
+    def agrees(assign: IntArray) -> bool:
+        both = (assign >= 0) & (known >= 0)
+        return bool(np.all(assign[both] == known[both]))
+
+    if len(hyps) > 1:
+        agreeing = [h for h in hyps if agrees(h[0])]
+        if len(agreeing) == 1:
+            hyps = agreeing
+        elif hyps[1][1].chi2 - hyps[0][1].chi2 > LIKELIHOOD_RATIO_CHI2:
+            hyps = hyps[:1]  # the best explains the frame 100 times better than the next
+        else:
+            return None
+    if not hyps:
+        return None
+    assign, fit = hyps[0]
+    if not agrees(assign) and np.sum(assign >= 0) < 4:
+        return None
+    return assign, fit
+
+
+def _misses(st: _Tracks, tr: IntArray, assign: IntArray) -> None:
+    lost = tr[(assign < 0) & (st.marker[tr] >= 0)]
+    st.misses[lost] += 1
+    st.marker[lost[st.misses[lost] >= MISS_FRAMES]] = -1
+
+
+def _label_check(data: MarkerInput, out: Association) -> None:
+    """Count tracker labels that disagree with the identified marker (labels are verified, never trusted)."""
+    if not data.label_names or data.layout is None:
+        return
+    ids = {name: i for i, name in enumerate(data.layout.ids)}
+    lab = np.array([ids.get(name, -2) for name in data.label_names])
+    has = (data.obs_label >= 0) & (out.obs_marker >= 0)
+    bad = int(np.sum(lab[data.obs_label[has]] != out.obs_marker[has]))
+    out.label_disagreements = bad
+    if bad:
+        out.warnings.append(f"{bad} tracker labels disagree with the identified markers (labels were not used)")
