@@ -1,0 +1,75 @@
+"""Estimates against seeded simulations' truth, the paper's chain beside ours, and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tumblescan.cli.marker_pose import app
+from tumblescan.marker_pose.estimate import estimate_poses
+from tumblescan.marker_pose.evaluate import evaluate
+from tumblescan.marker_pose.markers_io import markers_from_json
+from tumblescan.marker_pose.options import MarkerPoseOptions
+from tumblescan.marker_pose.simulate import SimConfig, simulate
+
+
+@pytest.mark.parametrize(("target", "motion", "seed"), [("kite", "paper", 0), ("box", "paper", 1), ("kite", "tumble", 1)])
+def test_given_layout_is_efficient_and_covered(target: str, motion: str, seed: int) -> None:
+    sim = simulate(SimConfig(target=target, motion=motion, frames=300), seed)  # type: ignore[arg-type]
+    result = estimate_poses(markers_from_json(sim.document()))
+    ev = evaluate(result, sim.truth())
+    assert ev["ratio"] <= 1.3
+    assert ev["coverage"] >= 0.98
+    assert 0.25 <= ev["nees_over_6"] <= 4
+    assert abs(ev["drift_deg"]) < 0.5
+
+
+def test_layout_is_bootstrapped_when_none_is_given() -> None:
+    sim = simulate(SimConfig(target="kite", frames=300, with_layout=False), 0)
+    result = estimate_poses(markers_from_json(sim.document()))
+    assert result.layout.source == "estimated"
+    assert len(result.layout.markers) == 4
+    ev = evaluate(result, sim.truth())
+    # Known gap: the bootstrapped case does not reach the 1.3 goal on every seed yet (see docs).
+    assert ev["ratio"] <= 2.0
+    assert ev["coverage"] >= 0.98
+
+
+def test_paper_chain_is_worse_than_ours() -> None:
+    sim = simulate(SimConfig(target="kite", frames=300), 3)
+    data = markers_from_json(sim.document())
+    paper = evaluate(estimate_poses(data, MarkerPoseOptions(method="paper")), sim.truth())
+    ours = evaluate(estimate_poses(data), sim.truth())
+    assert ours["ratio"] < paper["ratio"]
+
+
+def test_swapped_identities_are_caught() -> None:
+    sim = simulate(SimConfig(target="box", frames=300, swaps=3, outlier_fraction=0.0), 4)
+    result = estimate_poses(markers_from_json(sim.document()))
+    truth = sim.truth()["tracks"]
+    # Every track's majority association is its true marker (the swapped tracks end on another one).
+    wrong = [tr for tr, m in result.associations.items() if m is not None and truth[tr] is not None and m != truth[tr]]
+    assert len(wrong) <= 2 * 3  # only the swapped tracks (two per swap) may end on another marker
+
+
+def test_cli_estimate_prints_one_json_document(tmp_path: Path) -> None:
+    runner = CliRunner()
+    assert runner.invoke(app, ["simulate", "--out", str(tmp_path), "--seed", "5", "--frames", "100"]).exit_code == 0
+    r = runner.invoke(app, ["estimate", str(tmp_path / "markers.json"), "--json", "--report", str(tmp_path / "r.html")])
+    assert r.exit_code == 0
+    doc = json.loads(r.stdout)
+    assert doc["kind"] == "marker-pose-graph" and len(doc["poses"]) > 90
+    assert (tmp_path / "r.html").read_text().startswith("<!DOCTYPE html>")
+
+
+def test_cli_bad_input_exits_2_with_one_line(tmp_path: Path) -> None:
+    sim = simulate(SimConfig(frames=50), 0)
+    doc = sim.document()
+    doc["units"]["length"] = "mm"
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    r = CliRunner().invoke(app, ["estimate", str(tmp_path / "m.json"), "--json"])
+    assert r.exit_code == 2
+    assert "units.length" in r.output
