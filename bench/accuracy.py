@@ -16,12 +16,13 @@ import time
 import numpy as np
 
 from tumblescan import Scanner, Scene, estimate_motion, rectify, simulate_frames
-from tumblescan.motion import Motion
-from tumblescan.objective import MLProblem
-from tumblescan.sensor import SensorNoise
-from tumblescan.tracks import Tracks
-from tumblescan.truth import errors_against
-from tumblescan.uncertainty import axis_sigma_rad, covariance
+from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.sparse.objective import MLProblem
+from tumblescan.linescan.tracks import Tracks
+from tumblescan.linescan.truth import errors_against
+from tumblescan.linescan.validation import axis_sigma_rad
+from tumblescan.numerics.covariance import covariance
+from tumblescan.target.motion import Motion
 
 from .common import machine, out_dir, scenario, table
 
@@ -63,7 +64,7 @@ def noise_free(n: int) -> list[dict[str, float]]:
 
 def noisy(n: int) -> tuple[list[dict[str, float]], list[dict[str, float]]]:
     from tumblescan import Scene, simulate_tracks
-    from tumblescan.simulate import random_motion
+    from tumblescan.linescan.simulate import random_motion
 
     normalized, raw = [], []
     for seed in range(n):

@@ -34,7 +34,7 @@ from tumblescan import (
     simulate_tracks,
     write_ply,
 )
-from tumblescan.result import MotionResult
+from tumblescan.linescan.result import MotionResult
 
 from .common import machine, out_dir, table
 from .dense_bound import dense_bound, fitted_hits

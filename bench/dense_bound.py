@@ -21,12 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
-from tumblescan.estimate_frames import SURFEL_FRACTION
-from tumblescan.registration import extent_m
-from tumblescan.sensor import perpendiculars
-from tumblescan.simulate import FrameCloud
-from tumblescan.surfels import LineMapping, build_surfels, normal_variance, prepare
-from tumblescan.uncertainty import axis_sigma_rad
+from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.registration import extent_m
+from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, normal_variance, prepare
+from tumblescan.linescan.sensor import perpendiculars
+from tumblescan.linescan.simulate import FrameCloud
+from tumblescan.linescan.validation import axis_sigma_rad
 
 FloatArray = NDArray[np.float64]
 # A hit belongs to a face when it lies within this of the face's plane (metres, body frame).

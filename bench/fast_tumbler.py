@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from tumblescan import Scanner, Scene, TimedCloud, assemble_frames, estimate_from_frames, random_motion, simulate_frames
-from tumblescan.truth import errors_against
+from tumblescan.linescan.truth import errors_against
 
 from .common import machine, out_dir, table
 

@@ -21,12 +21,13 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 
 from tumblescan import SwarmConfig
-from tumblescan.fit import fit_model
-from tumblescan.initializer import cone_initial
-from tumblescan.motion import canonical_params
-from tumblescan.objective import PairwiseProblem
-from tumblescan.sensor import SensorNoise
-from tumblescan.swarm import VARIANTS, swarm_search
+from tumblescan.linescan.initializer import cone_initial
+from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.sparse.fit import fit_model
+from tumblescan.linescan.sparse.objective import PairwiseProblem
+from tumblescan.linescan.sparse.search import swarm_search
+from tumblescan.linescan.swarm import VARIANTS
+from tumblescan.target.motion import canonical_params
 
 from .common import machine, out_dir, scenario, table
 

@@ -2,8 +2,8 @@
 
 from tumblescan_client import Client
 with Client("http://127.0.0.1:8000") as client:
-    job = client.jobs.upload("tracks.json")
-    result = client.jobs.result(job.id)
+    job = client.jobs.upload("linescan-motion", files={"file": "tracks.json"})
+    result = client.jobs.result(job.id)  # typed by the job's kind
     print(result.spin.rate_deg_s, "+-", result.uncertainty.spin_rate_deg_s)
 """
 
@@ -27,12 +27,15 @@ from .errors import (
     UnprocessableEntityError,
     WaitTimeoutError,
 )
-from .models import Job, JobPage, MotionResult
+from .models import Artifact, Job, JobPage, Kind, KindSummary
+from .results import RESULT_MODELS, MotionResult, UnknownResult, result_model
 
 __all__ = [
+    "RESULT_MODELS",
     "APIConnectionError",
     "APIStatusError",
     "APITimeoutError",
+    "Artifact",
     "AsyncClient",
     "AuthenticationError",
     "BadRequestError",
@@ -42,6 +45,8 @@ __all__ = [
     "Job",
     "JobFailedError",
     "JobPage",
+    "Kind",
+    "KindSummary",
     "MotionResult",
     "NotFoundError",
     "PayloadTooLargeError",
@@ -50,6 +55,8 @@ __all__ = [
     "RetryPolicy",
     "ServiceUnavailableError",
     "TumblescanError",
+    "UnknownResult",
     "UnprocessableEntityError",
     "WaitTimeoutError",
+    "result_model",
 ]

@@ -6,15 +6,17 @@ import asyncio
 import json
 import os
 import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import httpx
+from pydantic import BaseModel
 
 from ._retry import RetryPolicy
 from .errors import APIConnectionError, APITimeoutError, JobFailedError, WaitTimeoutError, error_for
-from .models import Job, JobPage, MotionResult
+from .models import Artifact, Job, JobPage, Kind, KindSummary
+from .results import result_model
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
@@ -49,21 +51,60 @@ def _retry_delay(policy: RetryPolicy, attempt: int, resp: httpx.Response | None,
     return policy.delay(attempt, resp)
 
 
-def _upload_parts(
-    path: str | os.PathLike[str],
-    extra: dict[str, str | os.PathLike[str] | None],
-    options: dict[str, Any] | None,
-    kind: str,
-) -> tuple[dict[str, Any], dict[str, str]]:
-    """Multipart parts: ``file`` plus any of ``cloud``/``truth``; the caller closes the files."""
-    named = {"file": path} | {k: v for k, v in extra.items() if v is not None}
-    files = {k: (Path(v).name, open(v, "rb"), "application/octet-stream") for k, v in named.items()}  # noqa: SIM115
-    return files, {"options": json.dumps(options or {}), "kind": kind}
+PathLike = str | os.PathLike[str]
+Files = Mapping[str, PathLike | Sequence[PathLike]]
+DEFAULT_KIND = "linescan-motion"
 
 
-def _close(files: dict[str, Any]) -> None:
-    for _, fh, _ in files.values():
+def _create_body(
+    kind: str, input: dict[str, Any] | None, tracks: dict[str, Any] | None, options: Any
+) -> dict[str, Any]:
+    """The JSON of POST /v1/jobs; ``tracks=`` is the linescan-motion shorthand for ``input``."""
+    if (input is None) == (tracks is None):
+        raise TypeError("give the job's input as input=... (or tracks=... for linescan-motion)")
+    return {"kind": kind, "input": input if input is not None else {"tracks": tracks}, "options": options or {}}
+
+
+def _upload_request(
+    kind_or_path: str | os.PathLike[str],
+    files: Files | None,
+    legacy: dict[str, PathLike | None],
+    kind: str | None,
+) -> tuple[str, dict[str, list[PathLike]]]:
+    """The kind and its files by part. ``upload(kind, files={...})``, or as before the kinds
+    came, ``upload(path, cloud=..., truth=...)`` for linescan-motion's ``file``."""
+    if files is None:
+        named: dict[str, list[PathLike]] = {"file": [kind_or_path]}
+        named |= {k: [v] for k, v in legacy.items() if v is not None}
+        return kind or DEFAULT_KIND, named
+    if kind is not None or any(v is not None for v in legacy.values()):
+        raise TypeError("with files=..., give the kind as the first argument and every file in files")
+    parts = {k: [v] if isinstance(v, str | os.PathLike) else list(v) for k, v in files.items()}
+    return str(kind_or_path), parts
+
+
+def _open_parts(parts: dict[str, list[PathLike]]) -> list[tuple[str, tuple[str, BinaryIO, str]]]:
+    """Multipart file parts (several may share a field); the caller closes them."""
+    opened: list[tuple[str, tuple[str, BinaryIO, str]]] = []
+    try:
+        for field, paths in parts.items():
+            for p in paths:
+                opened.append((field, (Path(p).name, open(p, "rb"), "application/octet-stream")))  # noqa: SIM115
+    except BaseException:
+        _close(opened)
+        raise
+    return opened
+
+
+def _close(files: list[tuple[str, tuple[str, BinaryIO, str]]]) -> None:
+    for _, (_, fh, _) in files:
         fh.close()
+
+
+def _typed_result(job: Job) -> BaseModel:
+    if job.status != "succeeded" or job.result is None:
+        raise JobFailedError(job)
+    return result_model(job.kind).model_validate(job.result)
 
 
 def _next_poll(delay: float) -> float:
@@ -88,33 +129,44 @@ class Jobs:
 
     def create(
         self,
+        kind: str = DEFAULT_KIND,
+        input: dict[str, Any] | None = None,
         *,
-        tracks: dict[str, Any],
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        tracks: dict[str, Any] | None = None,
         timeout: float | None = None,
     ) -> Job:
-        body = {"kind": kind, "input": {"tracks": tracks}, "options": options or {}}
+        """Queue a job from JSON input (``client.kinds.get(kind)`` tells which forms take JSON)."""
+        body = _create_body(kind, input, tracks, options)
         return Job.model_validate(self._c._request("POST", "/v1/jobs", json=body, timeout=timeout).json())
 
     def upload(
         self,
-        path: str | os.PathLike[str],
+        kind: str | os.PathLike[str],
+        files: Files | None = None,
         *,
-        cloud: str | os.PathLike[str] | None = None,
-        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        cloud: PathLike | None = None,
+        truth: PathLike | None = None,
         timeout: float | None = None,
+        **legacy: Any,
     ) -> Job:
+        """Queue a job from files: ``upload("panel-axis", files={"meta": "meta.json", "image": "img.png"})``;
+        a part may take several files (a list). ``upload(path, cloud=..., truth=...)`` still works
+        for linescan-motion."""
+        kind_name, parts = _upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        if legacy:
+            raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
+
         def send() -> httpx.Response:
-            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
+            opened = _open_parts(parts)
+            data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return self._c._http.request(
-                    "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
+                    "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(files)
+                _close(opened)
 
         return Job.model_validate(self._c._send(send).json())
 
@@ -141,12 +193,21 @@ class Jobs:
         resp = self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold_s}, timeout=hold_s + 30)
         return Job.model_validate(resp.json())
 
-    def result(self, job_id: str, *, timeout: float | None = 600.0) -> MotionResult:
-        """Wait for the job and return its typed motion result (JobFailedError otherwise)."""
-        job = self.wait(job_id, timeout=timeout)
-        if job.status != "succeeded" or job.result is None:
-            raise JobFailedError(job)
-        return MotionResult.model_validate(job.result)
+    def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
+        """Wait for the job and return its result, typed by its kind (``MotionResult`` for
+        linescan-motion; see ``tumblescan_client.results``); JobFailedError otherwise."""
+        return _typed_result(self.wait(job_id, timeout=timeout))
+
+    def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
+        """The files a succeeded job has (its kind's artifacts and its report)."""
+        resp = self._c._request("GET", f"/v1/jobs/{job_id}/artifacts", timeout=timeout)
+        return [Artifact.model_validate(a) for a in resp.json()]
+
+    def download_artifact(
+        self, job_id: str, name: str, path: str | os.PathLike[str], *, timeout: float | None = None
+    ) -> Path:
+        """Stream one artifact of a succeeded job to ``path``."""
+        return self._download(f"/v1/jobs/{job_id}/artifacts/{name}", {}, path, timeout)
 
     def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
@@ -197,6 +258,32 @@ class Jobs:
             cursor = page.next_cursor
 
 
+class Kinds:
+    """``client.kinds``: the job kinds the service runs, with their input forms and schemas."""
+
+    def __init__(self, client: Client) -> None:
+        self._c = client
+
+    def list(self) -> list[KindSummary]:
+        return [KindSummary.model_validate(k) for k in self._c._request("GET", "/v1/kinds").json()]
+
+    def get(self, name: str) -> Kind:
+        return Kind.model_validate(self._c._request("GET", f"/v1/kinds/{name}").json())
+
+
+class AsyncKinds:
+    """``async_client.kinds``: the same as :class:`Kinds`, awaitable."""
+
+    def __init__(self, client: AsyncClient) -> None:
+        self._c = client
+
+    async def list(self) -> list[KindSummary]:
+        return [KindSummary.model_validate(k) for k in (await self._c._request("GET", "/v1/kinds")).json()]
+
+    async def get(self, name: str) -> Kind:
+        return Kind.model_validate((await self._c._request("GET", f"/v1/kinds/{name}")).json())
+
+
 class Client:
     """Synchronous client. ``api_key`` defaults to ``TUMBLESCAN_API_KEY``, ``base_url`` to
     ``TUMBLESCAN_URL`` or http://127.0.0.1:8000."""
@@ -214,6 +301,7 @@ class Client:
         url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
         self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = Jobs(self)
+        self.kinds = Kinds(self)
 
     def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
         return self._send(lambda: self._http.request(method, path, timeout=timeout or httpx.USE_CLIENT_DEFAULT, **kw))
@@ -248,33 +336,40 @@ class AsyncJobs:
 
     async def create(
         self,
+        kind: str = DEFAULT_KIND,
+        input: dict[str, Any] | None = None,
         *,
-        tracks: dict[str, Any],
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        tracks: dict[str, Any] | None = None,
         timeout: float | None = None,
     ) -> Job:
-        body = {"kind": kind, "input": {"tracks": tracks}, "options": options or {}}
+        body = _create_body(kind, input, tracks, options)
         return Job.model_validate((await self._c._request("POST", "/v1/jobs", json=body, timeout=timeout)).json())
 
     async def upload(
         self,
-        path: str | os.PathLike[str],
+        kind: str | os.PathLike[str],
+        files: Files | None = None,
         *,
-        cloud: str | os.PathLike[str] | None = None,
-        truth: str | os.PathLike[str] | None = None,
         options: dict[str, Any] | None = None,
-        kind: str = "linescan-motion",
+        cloud: PathLike | None = None,
+        truth: PathLike | None = None,
         timeout: float | None = None,
+        **legacy: Any,
     ) -> Job:
+        kind_name, parts = _upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        if legacy:
+            raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
+
         async def send() -> httpx.Response:
-            files, data = _upload_parts(path, {"cloud": cloud, "truth": truth}, options, kind)
+            opened = _open_parts(parts)
+            data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return await self._c._http.request(
-                    "POST", "/v1/jobs/upload", files=files, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
+                    "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(files)
+                _close(opened)
 
         return Job.model_validate((await self._c._send(send)).json())
 
@@ -297,11 +392,17 @@ class AsyncJobs:
             await asyncio.sleep(delay)
             delay = _next_poll(delay)
 
-    async def result(self, job_id: str, *, timeout: float | None = 600.0) -> MotionResult:
-        job = await self.wait(job_id, timeout=timeout)
-        if job.status != "succeeded" or job.result is None:
-            raise JobFailedError(job)
-        return MotionResult.model_validate(job.result)
+    async def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
+        return _typed_result(await self.wait(job_id, timeout=timeout))
+
+    async def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
+        resp = await self._c._request("GET", f"/v1/jobs/{job_id}/artifacts", timeout=timeout)
+        return [Artifact.model_validate(a) for a in resp.json()]
+
+    async def download_artifact(
+        self, job_id: str, name: str, path: str | os.PathLike[str], *, timeout: float | None = None
+    ) -> Path:
+        return await self._download(f"/v1/jobs/{job_id}/artifacts/{name}", {}, path, timeout)
 
     async def download_cloud(
         self, job_id: str, path: str | os.PathLike[str], *, format: str = "ply", timeout: float | None = None
@@ -368,6 +469,7 @@ class AsyncClient:
         url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
         self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = AsyncJobs(self)
+        self.kinds = AsyncKinds(self)
 
     async def _request(self, method: str, path: str, *, timeout: float | None = None, **kw: Any) -> httpx.Response:
         async def send() -> httpx.Response:

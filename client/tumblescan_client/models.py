@@ -1,4 +1,4 @@
-"""Typed responses. The motion result mirrors the service's contract exactly."""
+"""Typed responses: jobs, pages of jobs, kinds. Each kind's result model is in ``results/``."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict
 
-Vec3 = tuple[float, float, float]
+from .results.linescan import MotionResult as MotionResult  # importable from here, as before results/
+
 Status = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 FINAL = ("succeeded", "failed", "cancelled")
 
@@ -16,76 +17,26 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="allow")
 
 
-class Spin(_Model):
-    axis: Vec3
-    alpha_deg: float
-    beta_deg: float
-    rate_deg_s: float
-
-
-class Precession(_Model):
-    axis: Vec3 | None
-    alpha_deg: float | None
-    beta_deg: float | None
-    rate_deg_s: float
-    center_m: Vec3
-
-
-class Uncertainty(_Model):
-    spin_axis_deg: float
-    spin_rate_deg_s: float
-    precession_axis_deg: float | None
-    precession_rate_deg_s: float
-    center_m: Vec3
-
-
-class Fit(_Model):
-    rms_residual_m: float
-    observations: int
-    tracks: int
-    frames: int
-    outliers: int = 0
-    source: Literal["tracks", "frames"] = "tracks"
-    points_used: int | None = None
-    frame_rms_m: list[float | None] | None = None
-
-
-class Validation(_Model):
-    passed: bool
-    frames: tuple[int, int]
-    distance: float | None
-    threshold: float | None
-    test: str = "fixed"
-
-
-class Solver(_Model):
-    path: str
-    iterations: int
-    attempts: int
-    elapsed_s: float
-
-
-class MotionResult(_Model):
-    model: Literal["spin-precession", "spin-only"]
-    reference_time_s: float
-    spin: Spin
-    precession: Precession
-    nutation_angle_deg: float | None
-    uncertainty: Uncertainty
-    fit: Fit
-    validation: Validation
-    solver: Solver
-    warnings: list[str]
-
-
 class JobError(_Model):
     code: str
     message: str
 
 
 class JobArtifacts(_Model):
+    """Artifact name -> URL once the job has succeeded: the kind's files (``cloud`` for
+    linescan-motion) and ``report``. Any name is also ``artifacts[name]``."""
+
     cloud: str | None = None
     report: str | None = None
+
+    def __getitem__(self, name: str) -> str:
+        value = self.urls().get(name)
+        if value is None:
+            raise KeyError(name)
+        return value
+
+    def urls(self) -> dict[str, str]:
+        return {k: v for k, v in self.model_dump().items() if isinstance(v, str)}
 
 
 class Job(_Model):
@@ -109,3 +60,54 @@ class Job(_Model):
 class JobPage(_Model):
     items: list[Job]
     next_cursor: str | None
+
+
+class InputPart(_Model):
+    name: str
+    description: str
+    formats: list[str]
+    required: bool
+    many: bool
+
+
+class InputForm(_Model):
+    name: str
+    description: str
+    parts: list[InputPart]
+    json_input: bool
+    json_schema: dict[str, Any] | None
+    options_schema: dict[str, Any]
+
+
+class ArtifactSpec(_Model):
+    name: str
+    media_type: str
+    description: str
+
+
+class KindSummary(_Model):
+    name: str
+    title: str
+    url: str
+
+
+class Kind(_Model):
+    """A job kind as the service describes it (``GET /v1/kinds/{name}``)."""
+
+    name: str
+    title: str
+    forms: list[InputForm]
+    result_schema: dict[str, Any]
+    artifacts: list[ArtifactSpec]
+    limits: dict[str, Any]
+
+    def upload_parts(self) -> list[str]:
+        """Every upload field of every form, in order, without repeats."""
+        return list(dict.fromkeys(p.name for f in self.forms for p in f.parts))
+
+
+class Artifact(_Model):
+    name: str
+    media_type: str
+    description: str
+    url: str

@@ -29,22 +29,6 @@ class NonFiniteValueError(InputError):
     code = "non_finite_value"
 
 
-class TooFewFramesError(InputError):
-    code = "too_few_frames"
-
-
-class TooFewTracksError(InputError):
-    code = "too_few_tracks"
-
-
-class DuplicateObservationError(InputError):
-    code = "duplicate_observation"
-
-
-class SingleObservationTrackError(InputError):
-    code = "single_observation_track"
-
-
 class TimeOrderError(InputError):
     code = "time_out_of_order"
 

@@ -40,6 +40,10 @@ class Settings(BaseSettings):
     job_timeout_s: float = Field(600.0, gt=0, description="a job running longer fails with code 'timeout'")
     max_observations: int = Field(1_000_000, gt=0, description="largest tracks input accepted")
     max_cloud_points: int = Field(50_000_000, gt=0, description="largest cloud accepted")
+    limits: dict[str, dict[str, int | float]] = Field(
+        default_factory=dict,
+        description='per-kind limits over their defaults, as JSON: {"linescan-motion": {"max_cloud_points": 1e7}}',
+    )
     public_url: str | None = Field(None, description="base URL used in links; default from the request")
     heartbeat_s: float = Field(2.0, gt=0, description="how often a running job proves its worker alive")
     lease_s: float = Field(20.0, gt=0, description="a running job silent for this long has lost its worker")

@@ -13,14 +13,14 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
+from ..api import errors
 from ..jobs.queue import make_huey
 from ..jobs.runtime import get_runtime
 from ..jobs.service import JobService, Reaper
 from ..settings import Settings, get_settings
-from . import errors
 from .deps import key_id
 from .limits import BodyLimit
-from .routes import health, jobs, pages
+from .routes import health, jobs, kinds, pages
 from .watcher import JobWatcher
 
 log = logging.getLogger("tumblescan.api")
@@ -104,6 +104,7 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
     errors.install(app)
     app.add_middleware(BodyLimit, max_bytes=s.max_upload_bytes)
     app.include_router(jobs.router)
+    app.include_router(kinds.router)
     app.include_router(health.router)
     app.include_router(pages.router)
     return app

@@ -7,9 +7,13 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..jobs.kind import InputForm, JobKind
+from ..jobs.registry import kinds
 from ..jobs.store import Job
 
 Status = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+DEFAULT_KIND = "linescan-motion"  # what a request without a kind means (the first kind served)
+REPORT_TEXT = "the job's self-contained HTML report"
 
 
 class JobCreate(BaseModel):
@@ -17,8 +21,8 @@ class JobCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    kind: str = Field("linescan-motion", examples=["linescan-motion"])
-    input: dict[str, Any] = Field(description='for linescan-motion: {"tracks": <tracks JSON>}')
+    kind: str = Field(DEFAULT_KIND, examples=[DEFAULT_KIND], description="GET /v1/kinds lists them")
+    input: dict[str, Any] = Field(description='the kind\'s JSON input (linescan-motion: {"tracks": <tracks JSON>})')
     options: dict[str, Any] = Field(default_factory=dict, description="the kind's options; unknown names are a 422")
 
 
@@ -27,9 +31,11 @@ class JobError(BaseModel):
     message: str
 
 
-class JobArtifacts(BaseModel):
-    cloud: str | None = Field(None, description="URL of the rectified cloud (binary PLY)")
-    report: str | None = Field(None, description="URL of the HTML report")
+class ArtifactPublic(BaseModel):
+    name: str
+    media_type: str
+    description: str
+    url: str
 
 
 class JobPublic(BaseModel):
@@ -42,18 +48,21 @@ class JobPublic(BaseModel):
     started_at: datetime | None
     finished_at: datetime | None
     error: JobError | None
-    result: dict[str, Any] | None = Field(description="the kind's result (linescan-motion: the motion result)")
-    artifacts: JobArtifacts
+    result: dict[str, Any] | None = Field(description="the kind's result (GET /v1/kinds/{kind} has its schema)")
+    artifacts: dict[str, str] = Field(
+        description="artifact name -> URL (the kind's files, e.g. 'cloud', and 'report') once the job has succeeded"
+    )
 
     @classmethod
     def from_job(cls, job: Job, base_url: str) -> JobPublic:
         succeeded = job.status == "succeeded" and not job.artifacts_deleted
-        report = f"{base_url}/v1/jobs/{job.id}/report" if succeeded else None
-
-        def link(name: str) -> str | None:
-            return (
-                f"{base_url}/v1/jobs/{job.id}/{name}" if name in job.artifacts and not job.artifacts_deleted else None
-            )
+        # The line-scan cloud keeps its short URL (clients before the artifacts routes use it).
+        links = {
+            name: f"{base_url}/v1/jobs/{job.id}/" + ("cloud" if name == "cloud" else f"artifacts/{name}")
+            for name in (job.artifacts if succeeded else {})
+        }
+        if succeeded:
+            links["report"] = f"{base_url}/v1/jobs/{job.id}/report"
 
         return cls(
             id=job.id,
@@ -66,7 +75,7 @@ class JobPublic(BaseModel):
             finished_at=_ts(job.finished_at),
             error=JobError(code=job.error_code, message=job.error_message or "") if job.error_code else None,
             result=job.result,
-            artifacts=JobArtifacts(cloud=link("cloud"), report=report),
+            artifacts=links,
         )
 
 
@@ -81,3 +90,86 @@ class ErrorBody(BaseModel):
 
 def _ts(t: float | None) -> datetime | None:
     return None if t is None else datetime.fromtimestamp(t, UTC)
+
+
+class InputPartPublic(BaseModel):
+    name: str
+    description: str
+    formats: list[str]
+    required: bool
+    many: bool = Field(description="several files may come under this field")
+
+
+class InputFormPublic(BaseModel):
+    name: str
+    description: str
+    parts: list[InputPartPublic] = Field(description="upload fields of POST /v1/jobs/upload")
+    json_input: bool = Field(description="the form can also come as the JSON input of POST /v1/jobs")
+    json_schema: dict[str, Any] | None = Field(description="JSON schema of that input")
+    options_schema: dict[str, Any] = Field(description="JSON schema of the form's options (unknown names are a 422)")
+
+    @classmethod
+    def from_form(cls, form: InputForm) -> InputFormPublic:
+        parts = [
+            InputPartPublic(name=p.name, description=p.description, formats=list(p.formats), required=p.required,
+                            many=p.many)
+            for p in form.parts
+        ]  # fmt: skip
+        return cls(
+            name=form.name,
+            description=form.description,
+            parts=parts,
+            json_input=form.json_input,
+            json_schema=form.json_schema,
+            options_schema=form.options.model_json_schema(),
+        )
+
+
+class ArtifactSpecPublic(BaseModel):
+    name: str
+    media_type: str
+    description: str
+
+
+class KindSummary(BaseModel):
+    name: str
+    title: str
+    url: str
+
+
+class KindPublic(BaseModel):
+    name: str
+    title: str
+    forms: list[InputFormPublic]
+    result_schema: dict[str, Any]
+    artifacts: list[ArtifactSpecPublic] = Field(description="files a job may write, beside its 'report'")
+    limits: dict[str, Any] = Field(description="this deployment's limits for the kind")
+
+    @classmethod
+    def from_kind(cls, kind: JobKind, limits: BaseModel) -> KindPublic:
+        return cls(
+            name=kind.name,
+            title=kind.title,
+            forms=[InputFormPublic.from_form(f) for f in kind.forms],
+            result_schema=kind.result_model.model_json_schema(),
+            artifacts=[
+                ArtifactSpecPublic(name=a.name, media_type=a.media_type, description=a.description)
+                for a in kind.artifacts
+            ],
+            limits=limits.model_dump(mode="json"),
+        )
+
+
+def upload_schema() -> dict[str, Any]:
+    """The multipart body of POST /v1/jobs/upload: ``kind``, ``options`` and every kind's parts."""
+    properties: dict[str, Any] = {
+        "kind": {"type": "string", "enum": sorted(kinds()), "default": DEFAULT_KIND},
+        "options": {"type": "string", "description": "the options of the input's form, as a JSON object"},
+    }
+    for kind in kinds().values():
+        for form in kind.forms:
+            for part in form.parts:
+                binary = {"type": "string", "format": "binary"}
+                schema = {"type": "array", "items": binary} if part.many else binary
+                properties.setdefault(part.name, schema | {"description": f"{kind.name}: {part.description}"})
+    return {"type": "object", "properties": properties}

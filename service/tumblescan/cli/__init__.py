@@ -1,5 +1,6 @@
-"""Command line: one command group per job kind, the service commands, and the line-scan
-commands kept at the top level (``simulate``, ``estimate``, ``rectify``) as aliases.
+"""Command line: one command group per job kind (named as the kind), the service commands,
+and the line-scan commands kept at the top level (``simulate``, ``estimate``, ``rectify``) as
+aliases of ``tumblescan linescan-motion ...``.
 
 Bad input exits with code 2 and one line on stderr naming the problem.
 """
@@ -13,14 +14,19 @@ from . import linescan, service
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
-    help="Motion and position of space targets, from lidar, images and bearings.",
+    help="How space targets move and where they are: line-scan lidar, images, markers, bearings.",
 )
-for _name, _command in (
-    ("simulate", linescan.simulate),
-    ("estimate", linescan.estimate),
-    ("rectify", linescan.rectify),
-):
-    app.command(_name)(_command)
+
+# One group per kind, named as the kind (one line per kind, as in jobs/registry.py).
+KIND_GROUPS: list[tuple[str, typer.Typer]] = [
+    ("linescan-motion", linescan.app),
+]
+for _name, _group in KIND_GROUPS:
+    app.add_typer(_group, name=_name)
+
+# Before the kinds came, the line-scan commands were the top level; they still are.
+for _command in (linescan.simulate, linescan.estimate, linescan.rectify):
+    app.command(help=f"{_command.__doc__}\n\nAlias of 'tumblescan linescan-motion {_command.__name__}'.")(_command)
 service.register(app)
 
 

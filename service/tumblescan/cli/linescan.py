@@ -1,29 +1,24 @@
-"""``tumblescan linescan-motion simulate | estimate | rectify`` (also at the top level)."""
+"""``tumblescan linescan-motion simulate | estimate | rectify`` (also at the top level).
+
+``estimate`` runs the same pipeline as the job (``tumblescan.linescan.pipeline``)."""
 
 from __future__ import annotations
 
 import json
 import sys
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any
 
-import numpy as np
 import typer
 
-from ..cloud_io import TimedCloud, read_ply, write_ply
 from ..errors import InputError
-from ..estimate import EstimateOptions, estimate_motion
-from ..estimate_frames import estimate_from_frames
-from ..frames import read_frames
-from ..rectify import rectify as rectify_points
-from ..result import MotionResult
-from ..sensor import Scanner, SensorNoise
-from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
-from ..tracks import Tracks
-from ..tracks_io import read_tracks, write_tracks
-from ..truth import motion_to_json
-from .common import input_errors
+from ..linescan.options import FramesOptions, ModelChoice, Objective, Strategy, TracksOptions
+from ..linescan.sensor import SensorNoise
+from .common import input_errors, json_stdout
+
+if TYPE_CHECKING:
+    from ..linescan.pipeline import Outcome
+    from ..linescan.result import MotionResult
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="linescan-motion: spin and precession from line-scan lidar."
@@ -45,6 +40,14 @@ def simulate(
     dense: Annotated[bool, typer.Option(help="also cast every ray into frames.ply")] = True,
 ) -> None:
     """Simulate a tumbling satellite: writes tracks.json, frames.ply and truth.json."""
+    import numpy as np
+
+    from ..io.ply import TimedCloud, write_ply
+    from ..linescan.sensor import Scanner
+    from ..linescan.simulate import Scene, random_motion, simulate_frames, simulate_tracks
+    from ..linescan.tracks_io import write_tracks
+    from ..linescan.truth import motion_to_json
+
     rng = np.random.default_rng(seed)
     ws = (spin_rate_deg_s, spin_rate_deg_s) if spin_rate_deg_s is not None else (15.0, 37.0)
     wp = (precession_rate_deg_s, precession_rate_deg_s) if precession_rate_deg_s is not None else (3.0, 14.0)
@@ -72,17 +75,12 @@ def simulate(
     typer.echo(f"wrote {out / 'truth.json'}")
 
 
-Strategy = Literal["auto", "lm", "swarm"]
-Objective = Literal["ml", "pairwise"]
-ModelChoice = Literal["auto", "spin-precession", "spin-only"]
-
-
 @app.command()
 @input_errors
 def estimate(
     tracks_file: Annotated[Path, typer.Argument(help="tracks (JSON, CSV) or dense frames (PLY, NPZ)")],
-    strategy: Annotated[Strategy, typer.Option()] = "auto",
-    objective: Annotated[Objective, typer.Option()] = "ml",
+    strategy: Annotated[Strategy | None, typer.Option(help="tracks: auto, lm or swarm (default auto)")] = None,
+    objective: Annotated[Objective | None, typer.Option(help="tracks: ml or pairwise (default ml)")] = None,
     model: Annotated[ModelChoice, typer.Option()] = "auto",
     reference_time_s: Annotated[float | None, typer.Option(help="default: first observation")] = None,
     seed: Annotated[int, typer.Option(min=0)] = 0,
@@ -90,71 +88,96 @@ def estimate(
     angle_sigma_arcsec: Annotated[float | None, typer.Option(help="override the declared angle noise")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
     report: Annotated[Path | None, typer.Option(help="write the HTML report here")] = None,
-    cloud: Annotated[
-        Path | None, typer.Option(help="with --report: a PLY with per-point times to rectify and show")
-    ] = None,
+    cloud: Annotated[Path | None, typer.Option(help="tracks: a PLY with per-point times to rectify")] = None,
     truth: Annotated[
         Path | None, typer.Option(help="with --report: truth.json of a simulation, shown beside the estimate")
     ] = None,
     rectified: Annotated[
-        Path | None, typer.Option(help="frames input: write the rectified cloud here (default: <input>-rectified.ply)")
+        Path | None,
+        typer.Option(
+            help="where the rectified cloud goes (frames default: <input>-rectified.ply; tracks: with --cloud)"
+        ),
     ] = None,
     frame_period_s: Annotated[
         float | None, typer.Option(min=0.0, help="frames input without frame indices: the scanner's frame period")
     ] = None,
 ) -> None:
-    """Estimate the motion from feature tracks or dense frames and print it; frames are also
-    rectified to the reference time."""
-    if _is_cloud(tracks_file):
-        options = EstimateOptions(
-            model=model,
-            reference_time_s=reference_time_s,
-            seed=seed,
-            frame_period_s=frame_period_s,
-            sensor=_sensor(None, range_sigma_m, angle_sigma_arcsec),
+    """Estimate the motion from feature tracks or dense frames and print it; frames (and a
+    cloud given with tracks) are also rectified to the reference time."""
+    from ..linescan.pipeline import estimate_frames, estimate_tracks, input_form
+
+    form = input_form(tracks_file)
+    common: dict[str, Any] = {"model": model, "reference_time_s": reference_time_s, "seed": seed}
+    if form == "frames":
+        _refuse_for_frames(strategy=strategy, objective=objective, cloud=cloud)
+        sensor = _sensor(None, range_sigma_m, angle_sigma_arcsec)
+        frames_options = FramesOptions(**common, sensor=sensor, frame_period_s=frame_period_s)
+        with json_stdout(as_json):
+            outcome = estimate_frames(tracks_file, frames_options)
+        out: Path | None = rectified or tracks_file.with_name(tracks_file.stem + "-rectified.ply")
+    else:
+        if frame_period_s is not None:
+            raise InputError("--frame-period-s applies to frames input, not to tracks", field="frame_period_s")
+        declared = _declared_noise(tracks_file) if range_sigma_m is not None or angle_sigma_arcsec is not None else None
+        tracks_options = TracksOptions(
+            **common,
+            strategy=strategy or "auto",
+            objective=objective or "ml",
+            sensor=_sensor(declared, range_sigma_m, angle_sigma_arcsec),
         )
-        outputs = EstimateOutputs(as_json=as_json, report=report, rectified=rectified, truth=truth)
-        estimate_frames_cli(tracks_file, options, outputs)
+        with json_stdout(as_json):
+            outcome = estimate_tracks(tracks_file, tracks_options, cloud_path=cloud)
+        out = rectified or (cloud.with_name(cloud.stem + "-rectified.ply") if cloud is not None else None)
+    _write_outputs(outcome, tracks_file, out, report, truth)
+    _print_result(outcome.result, as_json=as_json)
+
+
+def _refuse_for_frames(**given: object) -> None:
+    """Options of tracks input given with frames: refused by name, never ignored."""
+    for name, value in given.items():
+        if value is not None:
+            raise InputError(f"--{name} applies to tracks input, not to frames", field=name)
+
+
+def _declared_noise(path: Path) -> SensorNoise | None:
+    from ..linescan.tracks_io import read_tracks
+
+    return read_tracks(path).sensor
+
+
+def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Path | None, truth: Path | None) -> None:
+    """The rectified cloud and the report, as the job writes them."""
+    from ..io.ply import write_ply
+
+    rectified = outcome.rectified
+    if out is not None and rectified is not None:
+        write_ply(out, rectified)
+        typer.echo(f"wrote {out}: {len(rectified)} points rectified to t={outcome.result.reference_time_s} s", err=True)
+    if report is None:
         return
-    tracks = read_tracks(tracks_file)
-    options = EstimateOptions(
-        strategy=strategy,
-        objective=objective,
-        model=model,
-        reference_time_s=reference_time_s,
-        seed=seed,
-        sensor=_sensor(tracks.sensor, range_sigma_m, angle_sigma_arcsec),
+    from ..linescan.pipeline import input_form
+    from ..linescan.report import ReportInputs, build_report
+    from ..linescan.tracks_io import read_tracks
+    from ..linescan.truth import load_truth
+
+    inputs = ReportInputs(
+        result=outcome.result,
+        title=f"Motion estimate: {source.stem}",
+        tracks=read_tracks(source) if input_form(source) == "tracks" else None,
+        distorted=outcome.cloud,
+        rectified=rectified,
+        truth=load_truth(truth) if truth is not None else None,
     )
-    result = estimate_motion(tracks, options)
-    if report is not None:
-        write_report(report, result, tracks, cloud, truth)
-    _print_result(result, as_json=as_json)
+    report.write_text(build_report(inputs), encoding="utf-8")
+    typer.echo(f"wrote {report}", err=True)
 
 
 def _print_result(result: MotionResult, *, as_json: bool) -> None:
     if as_json:
         sys.stdout.write(result.model_dump_json() + "\n")
+        sys.stdout.flush()
     else:
         typer.echo(format_result(result))
-
-
-def _is_cloud(path: Path) -> bool:
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(3) in (b"ply", b"PK\x03")
-    except OSError:
-        return False
-
-
-@dataclass(frozen=True)
-class EstimateOutputs:
-    """Where ``estimate`` writes: JSON or text on stdout, the HTML report, the rectified cloud
-    (frames input), and the truth shown in the report."""
-
-    as_json: bool = False
-    report: Path | None = None
-    rectified: Path | None = None
-    truth: Path | None = None
 
 
 def _sensor(
@@ -170,32 +193,6 @@ def _sensor(
     )
 
 
-def estimate_frames_cli(path: Path, options: EstimateOptions, outputs: EstimateOutputs) -> None:
-    """``estimate`` on dense frames: motion, rectified cloud, optional report."""
-    frames = read_frames(path, frame_period_s=options.frame_period_s)
-    result = estimate_from_frames(frames, options)
-    cloud = frames.cloud
-    xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=result.reference_time_s)
-    out = outputs.rectified or path.with_name(path.stem + "-rectified.ply")
-    rectified_cloud = TimedCloud(xyz, cloud.t_s, cloud.fields)
-    write_ply(out, rectified_cloud)
-    typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={result.reference_time_s} s", err=True)
-    if outputs.report is not None:
-        from ..jobs.linescan import load_truth
-        from ..linescan.report import ReportInputs, build_report
-
-        inputs = ReportInputs(
-            result=result,
-            title=f"Motion estimate: {path.stem}",
-            distorted=cloud,
-            rectified=rectified_cloud,
-            truth=load_truth(outputs.truth) if outputs.truth is not None else None,
-        )
-        outputs.report.write_text(build_report(inputs), encoding="utf-8")
-        typer.echo(f"wrote {outputs.report}", err=True)
-    _print_result(result, as_json=outputs.as_json)
-
-
 @app.command()
 @input_errors
 def rectify(
@@ -205,6 +202,9 @@ def rectify(
     reference_time_s: Annotated[float | None, typer.Option(help="default: the cloud's earliest time")] = None,
 ) -> None:
     """Map every point of a cloud to one reference time with an estimated motion."""
+    from ..io.ply import TimedCloud, read_ply, write_ply
+    from ..linescan.rectify import rectify as rectify_points
+
     result = load_result(motion)
     cloud = read_ply(cloud_file)
     target = float(cloud.t_s.min()) if reference_time_s is None and len(cloud) else (reference_time_s or 0.0)
@@ -213,30 +213,10 @@ def rectify(
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")
 
 
-def write_report(path: Path, result: MotionResult, tracks: Tracks, cloud: Path | None, truth: Path | None) -> None:
-    """The same report the service writes for a job."""
-    from ..jobs.linescan import load_truth
-    from ..linescan.report import ReportInputs, build_report
-
-    distorted = read_ply(cloud) if cloud is not None else None
-    rectified = None
-    if distorted is not None:
-        xyz = rectify_points(distorted.xyz_m, distorted.t_s, result.motion(), to_time_s=result.reference_time_s)
-        rectified = TimedCloud(xyz, distorted.t_s, distorted.fields)
-    inputs = ReportInputs(
-        result=result,
-        title=f"Motion estimate: {path.stem}",
-        tracks=tracks,
-        distorted=distorted,
-        rectified=rectified,
-        truth=load_truth(truth) if truth is not None else None,
-    )
-    path.write_text(build_report(inputs), encoding="utf-8")
-    typer.echo(f"wrote {path}", err=True)
-
-
 def load_result(path: Path) -> MotionResult:
     from pydantic import ValidationError
+
+    from ..linescan.result import MotionResult
 
     try:
         return MotionResult.model_validate_json(path.read_text())

@@ -17,6 +17,7 @@ from typing import Annotated, Any
 import typer
 
 from ..settings import Settings
+from .common import fail
 
 
 def _settings(**overrides: Any) -> Settings:
@@ -31,6 +32,7 @@ def register(app: typer.Typer) -> None:
     app.command()(serve)
     app.command()(worker)
     app.command()(submit)
+    app.command()(kinds)
     app.command()(report)
     app.command()(demo)
 
@@ -83,6 +85,7 @@ def worker(
     overrides = {"workers": workers, "data_dir": data_dir, "redis_url": redis_url, "database_url": database_url}
     s = _settings(**overrides)
     huey, _ = make_huey(s)
+    _announce(s, f"{socket.gethostname()}-{os.getpid()}")
     # This process forks the worker processes (now and whenever one dies), so it must never
     # hold the job store open: SQLite's lock bookkeeping does not survive a fork. Heartbeat
     # and reaper run in a separate, spawned process.
@@ -103,6 +106,19 @@ def worker(
     finally:
         housekeeper.terminate()
         housekeeper.join(timeout=10)
+
+
+def _announce(s: Settings, worker_id: str) -> None:
+    """The first worker heartbeat, before the consumer starts (the housekeeper's first beat
+    comes seconds later, after its imports), so /readyz says ready as soon as jobs can be
+    taken. The store is closed again: this process forks the workers."""
+    from ..jobs.store import JobStore
+
+    store = JobStore(s.db_url)
+    try:
+        store.worker_heartbeat(worker_id, socket.gethostname(), s.workers)
+    finally:
+        store.close()
 
 
 def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
@@ -136,30 +152,31 @@ def housekeeping(overrides: dict[str, Any], consumer_pid: int) -> None:
 
 
 def submit(
-    file: Annotated[Path, typer.Argument(help="tracks (JSON or CSV) or dense frames (PLY or NPZ)")],
-    cloud: Annotated[Path | None, typer.Option(help="PLY with per-point times to rectify")] = None,
+    files: Annotated[list[str], typer.Argument(help="FILE or PART=FILE; bare files go to the kind's first part")],
+    kind: Annotated[str, typer.Option(help="the job kind ('tumblescan kinds' lists them)")] = "linescan-motion",
+    cloud: Annotated[Path | None, typer.Option(help="linescan-motion: PLY with per-point times to rectify")] = None,
     truth: Annotated[Path | None, typer.Option(help="truth.json of a simulation, shown in the report")] = None,
     options: Annotated[str, typer.Option(help="job options as JSON")] = "{}",
     wait: Annotated[bool, typer.Option("--wait", help="wait for the result with a progress bar")] = False,
-    out: Annotated[Path | None, typer.Option(help="with --wait: write the rectified cloud here")] = None,
+    out: Annotated[Path | None, typer.Option(help="with --wait: write the rectified cloud (linescan) here")] = None,
+    artifacts: Annotated[
+        Path | None, typer.Option(help="with --wait: download every artifact into this folder")
+    ] = None,
     url: Annotated[str | None, typer.Option(help="service URL (TUMBLESCAN_URL)")] = None,
     api_key: Annotated[str | None, typer.Option(help="API key (TUMBLESCAN_API_KEY)")] = None,
     timeout: Annotated[float, typer.Option(help="seconds to wait")] = 600.0,
 ) -> None:
-    """Submit a job to a running service; print the job, or with --wait its result."""
+    """Submit a job of any kind to a running service; print the job, or with --wait its result."""
     from tumblescan_client import Client, TumblescanError
 
     try:
         opts = json.loads(options)
     except json.JSONDecodeError as exc:
-        typer.echo(f"error: --options is not valid JSON: {exc.msg}", err=True)
-        raise typer.Exit(2) from None
-    if not file.is_file():
-        typer.echo(f"error: no such file: {file}", err=True)
-        raise typer.Exit(2)
+        raise fail(f"--options is not valid JSON: {exc.msg}") from None
     try:
         with Client(url, api_key=api_key) as client:
-            job = client.jobs.upload(file, cloud=cloud, truth=truth, options=opts)
+            parts = _parts(files, client.kinds.get(kind).upload_parts(), {"cloud": cloud, "truth": truth})
+            job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
                 return
@@ -175,9 +192,63 @@ def submit(
             if out is not None and job.artifacts.cloud:
                 client.jobs.download_cloud(job.id, out)
                 typer.echo(f"wrote {out}", err=True)
+            if artifacts is not None:
+                artifacts.mkdir(parents=True, exist_ok=True)
+                for a in client.jobs.artifacts(job.id):
+                    target = client.jobs.download_artifact(job.id, a.name, artifacts / _artifact_file(a))
+                    typer.echo(f"wrote {target}", err=True)
     except TumblescanError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2 if getattr(exc, "status_code", 0) in (400, 404, 413, 422) else 1) from None
+        raise typer.Exit(_client_error(exc)) from None
+
+
+def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
+    """Files by upload part: ``PART=FILE`` names its part, a bare file goes to the first part."""
+    parts: dict[str, list[Path]] = {}
+    for arg in args:
+        name, sep, rest = arg.partition("=")
+        part, path = (name, Path(rest)) if sep and name in known else (known[0], Path(arg))
+        parts.setdefault(part, []).append(path)
+    for name, given in named.items():
+        if given is not None:
+            parts.setdefault(name, []).append(given)
+    for paths in parts.values():
+        for path in paths:
+            if not path.is_file():
+                raise fail(f"no such file: {path}")
+    return parts
+
+
+def _artifact_file(artifact: Any) -> str:
+    suffix = {"text/html": ".html", "application/json": ".json", "image/png": ".png"}.get(artifact.media_type, "")
+    return artifact.name + ("" if "." in artifact.name else suffix or ".bin")
+
+
+def _client_error(exc: Exception) -> int:
+    """One line on stderr; exit 2 for what the caller got wrong, 1 for the service's trouble."""
+    typer.echo(f"error: {exc}", err=True)
+    return 2 if getattr(exc, "status_code", 0) in (400, 404, 409, 413, 422) else 1
+
+
+def kinds(as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False) -> None:
+    """List the job kinds this installation runs, with their input forms."""
+    from ..jobs.registry import kinds as registered
+
+    if as_json:
+        listing = [
+            {"name": k.name, "title": k.title, "forms": [_form_summary(f) for f in k.forms]}
+            for k in registered().values()
+        ]
+        typer.echo(json.dumps(listing, indent=2))
+        return
+    for k in registered().values():
+        typer.echo(f"{k.name}: {k.title}")
+        for f in k.forms:
+            via = " (or JSON input)" if f.json_input else ""
+            typer.echo(f"    {f.name}: upload {', '.join(p.name for p in f.parts)}{via}")
+
+
+def _form_summary(form: Any) -> dict[str, Any]:
+    return {"name": form.name, "parts": [p.name for p in form.parts], "json_input": form.json_input}
 
 
 class ProgressBar:
@@ -206,8 +277,7 @@ def report(
         with Client(url, api_key=api_key) as client:
             client.jobs.download_report(job_id, out)
     except TumblescanError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2 if getattr(exc, "status_code", 0) in (404, 409, 422) else 1) from None
+        raise typer.Exit(_client_error(exc)) from None
     typer.echo(f"wrote {out}")
 
 
@@ -223,12 +293,12 @@ def demo(
 
     from tumblescan_client import Client
 
-    from ..cloud_io import TimedCloud, read_ply, write_ply
-    from ..report_text import comparison_table
-    from ..result import MotionResult
-    from ..simulate import Scene, random_motion, simulate_frames, simulate_tracks
-    from ..tracks_io import write_tracks
-    from ..truth import motion_to_json
+    from ..io.ply import TimedCloud, read_ply, write_ply
+    from ..linescan.report_text import comparison_table
+    from ..linescan.result import MotionResult
+    from ..linescan.simulate import Scene, random_motion, simulate_frames, simulate_tracks
+    from ..linescan.tracks_io import write_tracks
+    from ..linescan.truth import motion_to_json
 
     out.mkdir(parents=True, exist_ok=True)
     port = port or _free_port()

@@ -7,6 +7,7 @@ into place, so a crash leaves no half-written artifact behind.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -19,6 +20,13 @@ class UploadTooLargeError(Exception):
     def __init__(self, limit: int) -> None:
         super().__init__(f"upload exceeds the limit of {limit} bytes")
         self.limit = limit
+
+
+def safe_name(filename: str | None) -> str:
+    """The base name of ``filename`` with only letters, digits, ``.``, ``_`` and ``-`` kept and
+    no leading dot ('' if nothing is left)."""
+    base = re.split(r"[\\/]", filename or "")[-1]
+    return re.sub(r"[^A-Za-z0-9._-]", "_", base).lstrip(".")[:120]
 
 
 class ArtifactStore:
@@ -52,6 +60,17 @@ class ArtifactStore:
             Path(tmp).unlink(missing_ok=True)
             raise
         return target
+
+    def save_upload(
+        self, job_id: str, field: str, index: int, filename: str | None, src: BinaryIO, *, max_bytes: int
+    ) -> Path:
+        """Store one uploaded file as ``uploads/<field>/<name>``: the uploader's name reduced to
+        a safe base name (never a path), so a kind can match names a manifest lists."""
+        name = safe_name(filename) or f"{field}-{index}"
+        folder = f"uploads/{field}"
+        if self.path(job_id, f"{folder}/{name}").exists():
+            name = f"{index}-{name}"
+        return self.save_stream(job_id, f"{folder}/{name}", src, max_bytes=max_bytes)
 
     def save_bytes(self, job_id: str, name: str, data: bytes) -> Path:
         target = self.path(job_id, name)

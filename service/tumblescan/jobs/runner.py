@@ -10,7 +10,8 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
-from .kinds import JobCancelledError, JobContext, get_kind
+from .kind import JobCancelledError, JobContext
+from .registry import get_kind
 from .runtime import Runtime
 
 log = logging.getLogger("tumblescan.worker")

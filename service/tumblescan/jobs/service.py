@@ -8,10 +8,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
-from ..errors import InputError
-from .kinds import FinishedJob, Limits, get_kind, kind_names
+from ..errors import MalformedInputError
+from .kind import FinishedJob, InputForm, JobKind, Submission
+from .registry import get_kind
 from .runtime import Runtime
 from .store import FINAL, Job, new_id
 
@@ -23,16 +24,15 @@ class QueueUnavailableError(Exception):
     """The queue could not take the job; nothing was kept. Retry later."""
 
 
-class UnknownKindError(InputError):
-    code = "unknown_kind"
-
-
 class OptionsError(Exception):
     """Options failed validation; ``errors`` are pydantic's, each naming its option."""
 
     def __init__(self, errors: list[dict[str, Any]]) -> None:
         super().__init__("invalid options")
         self.errors = errors
+
+
+Upload = tuple[str | None, BinaryIO]  # the uploader's file name (never trusted) and the stream
 
 
 class JobService:
@@ -42,53 +42,64 @@ class JobService:
         self.artifacts = rt.artifacts
         self._enqueue = enqueue
         self._pending = pending
-        s = rt.settings
-        self.limits = Limits(max_observations=s.max_observations, max_cloud_points=s.max_cloud_points)
 
-    # Submission.
+    # Submission: the kind picks the form, the form's model validates the options, the kind
+    # validates the whole input; only then is the job stored and queued.
 
     def submit_json(self, kind_name: str, payload: Any, options: dict[str, Any], owner: str | None) -> Job:
-        kind, opts = self._kind_and_options(kind_name, options)
+        kind = get_kind(kind_name)
+        form = kind.form_of({}, payload)
+        if not form.json_input:
+            raise MalformedInputError(
+                f"{kind_name} takes its input as an upload (POST /v1/jobs/upload), not as JSON", field="input"
+            )
+        opts = self._options(kind, form, options)
         job_id = new_id()
         try:
-            inputs = kind.accept_json(
-                payload, lambda name, data: self.artifacts.save_bytes(job_id, name, data), self.limits
-            )
+            sub = Submission(form, opts, self.limits(kind), self.artifacts.job_dir(job_id), payload=payload)
+            inputs = kind.accept(sub)
         except BaseException:
             self.artifacts.delete(job_id)
             raise
-        return self._create_and_enqueue(job_id, kind_name, opts, inputs, owner)
+        return self._create_and_enqueue(job_id, kind_name, _dump(opts), inputs, owner)
 
     def submit_upload(
-        self, kind_name: str, files: dict[str, BinaryIO], options: dict[str, Any], owner: str | None
+        self, kind_name: str, files: dict[str, list[Upload]], options: dict[str, Any], owner: str | None
     ) -> Job:
-        kind, opts = self._kind_and_options(kind_name, options)
+        kind = get_kind(kind_name)
+        _check_fields(kind, files)
         job_id = new_id()
         try:
             stored = {
-                field: self.artifacts.save_stream(
-                    job_id, f"upload-{field}", src, max_bytes=self.rt.settings.max_upload_bytes
-                )
-                for field, src in files.items()
+                field: [
+                    self.artifacts.save_upload(job_id, field, i, name, src, max_bytes=self.rt.settings.max_upload_bytes)
+                    for i, (name, src) in enumerate(items)
+                ]
+                for field, items in files.items()
             }
-            inputs = kind.accept_files(stored, self.limits, opts)
+            form = kind.form_of(stored, None)
+            _check_parts(form, stored)
+            opts = self._options(kind, form, options)
+            sub = Submission(form, opts, self.limits(kind), self.artifacts.job_dir(job_id), files=stored)
+            inputs = kind.accept(sub)
         except BaseException:
             self.artifacts.delete(job_id)
             raise
-        return self._create_and_enqueue(job_id, kind_name, opts, inputs, owner)
+        return self._create_and_enqueue(job_id, kind_name, _dump(opts), inputs, owner)
 
-    def _kind_and_options(self, kind_name: str, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    def limits(self, kind: JobKind) -> BaseModel:
+        """The kind's limits: its defaults, a setting of the same name (``TUMBLESCAN_MAX_...``),
+        then ``TUMBLESCAN_LIMITS`` (``{"<kind>": {"<limit>": value}}``)."""
+        s = self.rt.settings
+        values = {name: getattr(s, name) for name in kind.limits_model.model_fields if hasattr(s, name)}
+        return kind.limits_model.model_validate(values | s.limits.get(kind.name, {}))
+
+    def _options(self, kind: JobKind, form: InputForm, options: dict[str, Any]) -> BaseModel:
         try:
-            kind = get_kind(kind_name)
-        except KeyError:
-            raise UnknownKindError(
-                f"unknown job kind {kind_name!r}; known: {', '.join(kind_names())}", field="kind"
-            ) from None
-        try:
-            opts = kind.options_model.model_validate(options)
+            return form.options.model_validate(options)
         except ValidationError as exc:
-            raise OptionsError([dict(e) for e in exc.errors(include_url=False, include_input=False)]) from None
-        return kind, opts.model_dump(mode="json", exclude_unset=True)
+            errors = [dict(e) for e in exc.errors(include_url=False, include_input=False)]
+            raise OptionsError([_explain(e, kind, form) for e in errors]) from None
 
     def _create_and_enqueue(
         self, job_id: str, kind: str, options: dict[str, Any], inputs: dict[str, str], owner: str | None
@@ -178,3 +189,43 @@ class Reaper(threading.Thread):
                 self.service.reap_once()
             except Exception:
                 log.exception("reaper pass failed; retrying in %.0f s", self.interval_s)
+
+
+def _dump(options: BaseModel) -> dict[str, Any]:
+    return options.model_dump(mode="json", exclude_unset=True)
+
+
+def _check_fields(kind: JobKind, files: dict[str, list[Upload]]) -> None:
+    """Every upload field is one some form of the kind declares."""
+    known = {part.name for form in kind.forms for part in form.parts}
+    unknown = sorted(set(files) - known)
+    if unknown:
+        raise MalformedInputError(
+            f"unknown upload field(s) for {kind.name}: {', '.join(unknown)} (it takes {', '.join(sorted(known))})",
+            field=unknown[0],
+        )
+
+
+def _check_parts(form: InputForm, files: dict[str, list[Path]]) -> None:
+    """Required parts present; one file where the part takes one; no part of another form."""
+    declared = {part.name: part for part in form.parts}
+    for name in files:
+        if name not in declared:
+            raise MalformedInputError(f"'{name}' does not go with {form.name} input", field=name)
+    for part in form.parts:
+        if part.required and not files.get(part.name):
+            raise MalformedInputError(f"{form.name} input needs '{part.name}' ({part.description})", field=part.name)
+        if not part.many and len(files.get(part.name, [])) > 1:
+            raise MalformedInputError(f"'{part.name}' takes one file; got {len(files[part.name])}", field=part.name)
+
+
+def _explain(error: dict[str, Any], kind: JobKind, form: InputForm) -> dict[str, Any]:
+    """An option of another input form is named as such, not as unknown."""
+    loc = error.get("loc", ())
+    if error.get("type") != "extra_forbidden" or len(loc) != 1:
+        return error
+    others = [f.name for f in kind.forms if f is not form and loc[0] in f.options.model_fields]
+    if others:
+        error = error | {"msg": f"does not apply to {form.name} input (an option of {' and '.join(others)} input)"}
+        error["type"] = "option_not_applicable"
+    return error

@@ -130,6 +130,10 @@ class JobStore:
         with self.engine.begin() as conn:
             yield conn
 
+    def close(self) -> None:
+        """Drop every pooled connection (before a fork: a connection must never cross one)."""
+        self.engine.dispose()
+
     def ping(self) -> None:
         with self.engine.connect() as conn:
             conn.execute(select(1))

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..cloud_io import TimedCloud
-from ..motion import Motion
-from ..rectify import rectify
+from ..io.ply import TimedCloud
 from ..report import figure_html, page, value_text
-from ..result import MotionResult
-from ..tracks import Tracks
-from ..truth import errors_against
+from ..target.motion import Motion
+from .rectify import rectify
+from .result import MotionResult
+from .tracks import Tracks
+from .truth import errors_against
 
 MAX_POINTS = 40_000
 

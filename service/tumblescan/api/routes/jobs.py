@@ -1,25 +1,41 @@
-"""``/v1/jobs``: create, upload, read, list, download the cloud, cancel."""
+"""``/v1/jobs``: create, upload, read, list, artifacts, report, cancel."""
 
 from __future__ import annotations
 
 import json
 import tempfile
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, File, Form, HTTPException, Query, Request, Response, UploadFile, status
+from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
+from starlette.datastructures import FormData
 
-from ...cloud_io import read_ply
 from ...errors import MalformedInputError
+from ...io.ply import read_ply
+from ...jobs.registry import get_kind
+from ...jobs.service import Upload
 from ...jobs.store import FINAL, Job
 from ..deps import CallerDep, ServiceDep
-from ..schemas import ErrorBody, JobCreate, JobList, JobPublic, Status
+from ..schemas import (
+    DEFAULT_KIND,
+    REPORT_TEXT,
+    ArtifactPublic,
+    ErrorBody,
+    JobCreate,
+    JobList,
+    JobPublic,
+    Status,
+    upload_schema,
+)
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 401, 404, 413, 422, 503, 507)}
+# An image sequence may come as many files; the body limit still bounds the total size.
+MAX_FILES, MAX_FIELDS = 5000, 100
 
 
 def base_url(request: Request) -> str:
@@ -40,35 +56,57 @@ def accepted(job: Job, request: Request, response: Response) -> JobPublic:
 def create_job(
     body: JobCreate, request: Request, response: Response, service: ServiceDep, caller: CallerDep
 ) -> JobPublic:
-    """Queue a job from JSON input (``{"tracks": ...}`` for linescan-motion)."""
+    """Queue a job from JSON input (the kinds whose forms take JSON; ``{"tracks": ...}`` for
+    linescan-motion)."""
     job = service.submit_json(body.kind, body.input, body.options, caller.key_id)
     return accepted(job, request, response)
 
 
-@router.post("/upload", status_code=status.HTTP_202_ACCEPTED, responses=ERRORS)
-def upload_job(
-    request: Request,
-    response: Response,
-    service: ServiceDep,
-    caller: CallerDep,
-    file: Annotated[UploadFile, File(description="tracks (JSON or CSV)")],
-    cloud: Annotated[UploadFile | None, File(description="optional PLY with per-point times to rectify")] = None,
-    truth: Annotated[
-        UploadFile | None, File(description="optional truth.json of a simulation, shown in the report")
-    ] = None,
-    options: Annotated[str, Form(description="the kind's options as a JSON object")] = "{}",
-    kind: Annotated[str, Form()] = "linescan-motion",
-) -> JobPublic:
-    """Queue a job from uploaded files; they are streamed to disk, never held in memory."""
+UPLOAD_BODY = upload_schema()
+
+
+@router.post(
+    "/upload",
+    status_code=status.HTTP_202_ACCEPTED,
+    responses=ERRORS,
+    openapi_extra={"requestBody": {"required": True, "content": {"multipart/form-data": {"schema": UPLOAD_BODY}}}},
+)
+async def upload_job(request: Request, response: Response, service: ServiceDep, caller: CallerDep) -> JobPublic:
+    """Queue a job from uploaded files: ``kind``, ``options`` (JSON) and the kind's parts
+    (``GET /v1/kinds/{name}`` lists them). Files are streamed to disk, never held in memory."""
+    form = await request.form(max_files=MAX_FILES, max_fields=MAX_FIELDS)
     try:
-        opts = json.loads(options)
+        kind, options, files = _parse_upload(form)
+        job = await run_in_threadpool(service.submit_upload, kind, files, options, caller.key_id)
+    finally:
+        await form.close()
+    return accepted(job, request, response)
+
+
+def _parse_upload(form: FormData) -> tuple[str, dict[str, Any], dict[str, list[Upload]]]:
+    """The kind, the options and the files by field; text where a file belongs is an error."""
+    kind = form.get("kind", DEFAULT_KIND)
+    raw = form.get("options", "{}")
+    if not isinstance(kind, str):
+        raise MalformedInputError("kind must be a text field, not a file", field="kind")
+    if not isinstance(raw, str):
+        raise MalformedInputError("options must be a text field holding a JSON object", field="options")
+    try:
+        options = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise MalformedInputError(f"options is not valid JSON: {exc.msg}", field="options") from None
-    if not isinstance(opts, dict):
+    if not isinstance(options, dict):
         raise MalformedInputError("options must be a JSON object", field="options")
-    files = {"file": file.file} | {name: f.file for name, f in (("cloud", cloud), ("truth", truth)) if f is not None}
-    job = service.submit_upload(kind, files, opts, caller.key_id)
-    return accepted(job, request, response)
+    files: dict[str, list[Upload]] = {}
+    for field, value in form.multi_items():
+        if field in ("kind", "options"):
+            continue
+        if isinstance(value, str):
+            raise MalformedInputError(f"'{field}' must be a file, not a text field", field=field)
+        files.setdefault(field, []).append((value.filename, value.file))
+    if not files:
+        raise MalformedInputError("the upload has no file; GET /v1/kinds/{kind} lists its parts", field="file")
+    return kind, options, files
 
 
 @router.get("", responses=ERRORS)
@@ -106,6 +144,50 @@ async def get_job(
     return public(job, request)
 
 
+@router.get("/{job_id}/artifacts", responses={**ERRORS, 409: {"model": ErrorBody}})
+def list_artifacts(job_id: str, request: Request, service: ServiceDep, caller: CallerDep) -> list[ArtifactPublic]:
+    """The files a succeeded job has: its kind's artifacts and its HTML report."""
+    job = _succeeded(service.get(job_id, caller.scope), job_id, "its artifacts exist")
+    kind = get_kind(job.kind)
+    specs = {a.name: a for a in kind.artifacts}
+    base = f"{base_url(request)}/v1/jobs/{job_id}/artifacts"
+    items = [
+        ArtifactPublic(name=name, media_type=specs[name].media_type, description=specs[name].description,
+                       url=f"{base}/{name}")
+        for name in job.artifacts
+        if name in specs
+    ]  # fmt: skip
+    return [
+        *items,
+        ArtifactPublic(name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report"),
+    ]
+
+
+@router.get(
+    "/{job_id}/artifacts/{name}",
+    responses={**ERRORS, 200: {"content": {"application/octet-stream": {}}}, 409: {"model": ErrorBody}},
+    response_class=FileResponse,
+)
+def get_artifact(
+    job_id: str,
+    name: str,
+    service: ServiceDep,
+    caller: CallerDep,
+    format: Annotated[Literal["ply", "npz"] | None, Query(description="PLY artifacts: ply (default) or npz")] = None,
+) -> FileResponse:
+    """One artifact of a succeeded job (``report`` is its HTML report)."""
+    if name == "report":
+        return get_job_report(job_id, service, caller)
+    job = _succeeded(service.get(job_id, caller.scope), job_id, f"its {name} exists")
+    spec = next((a for a in get_kind(job.kind).artifacts if a.name == name), None)
+    if spec is None or name not in job.artifacts:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no artifact {name!r}")
+    path = service.artifacts.path(job_id, job.artifacts[name])
+    if format == "npz" and path.suffix == ".ply":
+        return _as_npz(path, f"{job_id}-{name}.npz")
+    return FileResponse(path, media_type=spec.media_type, filename=f"{job_id}-{path.name}")
+
+
 @router.get(
     "/{job_id}/cloud",
     responses={
@@ -118,30 +200,17 @@ async def get_job(
 def get_job_cloud(
     job_id: str, service: ServiceDep, caller: CallerDep, format: Annotated[Literal["ply", "npz"], Query()] = "ply"
 ) -> FileResponse:
-    """The rectified cloud: binary PLY (default) or NPZ (``xyz_m``, ``t_s`` and every other field)."""
-    job = _found(service.get(job_id, caller.scope), job_id)
-    if job.status != "succeeded":
-        raise HTTPException(
-            status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; the cloud exists once it has succeeded"
-        )
-    if "cloud" not in job.artifacts or job.artifacts_deleted:
+    """Alias of ``/artifacts/cloud``: the rectified cloud, binary PLY (default) or NPZ
+    (``xyz_m``, ``t_s`` and every other field)."""
+    job = _succeeded(service.get(job_id, caller.scope), job_id, "the cloud exists")
+    if "cloud" not in job.artifacts:
         raise HTTPException(
             status.HTTP_404_NOT_FOUND, f"job {job_id} has no cloud (submit one with the tracks to get it rectified)"
         )
     path = service.artifacts.path(job_id, job.artifacts["cloud"])
-    if format == "ply":
-        return FileResponse(path, media_type="application/octet-stream", filename=f"{job_id}-rectified.ply")
-    cloud = read_ply(path)
-    tmp = tempfile.NamedTemporaryFile(suffix=".npz", delete=False)  # noqa: SIM115 (removed after sending)
-    with tmp:
-        arrays: dict[str, Any] = {"xyz_m": cloud.xyz_m, "t_s": cloud.t_s, **cloud.fields}
-        np.savez(tmp, **arrays)
-    return FileResponse(
-        tmp.name,
-        media_type="application/octet-stream",
-        filename=f"{job_id}-rectified.npz",
-        background=BackgroundTask(_unlink, tmp.name),
-    )
+    if format == "npz":
+        return _as_npz(path, f"{job_id}-rectified.npz")
+    return FileResponse(path, media_type="application/octet-stream", filename=f"{job_id}-rectified.ply")
 
 
 @router.get(
@@ -154,12 +223,9 @@ def get_job_cloud(
     response_class=FileResponse,
 )
 def get_job_report(job_id: str, service: ServiceDep, caller: CallerDep) -> FileResponse:
-    """The job's report: one self-contained HTML file that works offline."""
-    job = _found(service.get(job_id, caller.scope), job_id)
-    if job.status != "succeeded" or job.artifacts_deleted:
-        raise HTTPException(
-            status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; its report exists once it has succeeded"
-        )
+    """The job's report: one self-contained HTML file that works offline (alias of
+    ``/artifacts/report``)."""
+    job = _succeeded(service.get(job_id, caller.scope), job_id, "its report exists")
     return FileResponse(service.report_path(job), media_type="text/html")
 
 
@@ -168,6 +234,25 @@ def cancel_job(job_id: str, request: Request, service: ServiceDep, caller: Calle
     """Cancel a queued or running job (a running one stops at its next check, within seconds);
     its files are deleted once it has stopped. Finished jobs are returned unchanged."""
     return public(_found(service.cancel(job_id, caller.scope), job_id), request)
+
+
+def _succeeded(job: Job | None, job_id: str, what: str) -> Job:
+    job = _found(job, job_id)
+    if job.status != "succeeded" or job.artifacts_deleted:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; {what} once it has succeeded")
+    return job
+
+
+def _as_npz(path: Path, filename: str) -> FileResponse:
+    """A PLY artifact as NPZ: ``xyz_m``, ``t_s`` and every other per-point field."""
+    cloud = read_ply(path)
+    tmp = tempfile.NamedTemporaryFile(suffix=".npz", delete=False)  # noqa: SIM115 (removed after sending)
+    with tmp:
+        arrays: dict[str, Any] = {"xyz_m": cloud.xyz_m, "t_s": cloud.t_s, **cloud.fields}
+        np.savez(tmp, **arrays)
+    return FileResponse(
+        tmp.name, media_type="application/octet-stream", filename=filename, background=BackgroundTask(_unlink, tmp.name)
+    )
 
 
 def _found(job: Job | None, job_id: str) -> Job:

@@ -1,0 +1,68 @@
+"""Rotations: axes from spherical angles and back, Rodrigues' rotation of vectors and as matrices.
+
+Every function accepts complex values (Jacobians by complex step) and leading batch axes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[Any]
+
+
+def axis_from_angles(alpha_rad: ArrayLike, beta_rad: ArrayLike) -> Array:
+    """Unit axis ``(cos a sin b, sin a sin b, cos b)``; shape ``(..., 3)``."""
+    a = np.asarray(alpha_rad)
+    b = np.asarray(beta_rad)
+    sb = np.sin(b)
+    return np.stack([np.cos(a) * sb, np.sin(a) * sb, np.cos(b)], axis=-1)
+
+
+def angles_from_axis(axis: ArrayLike) -> tuple[float, float]:
+    """Spherical angles ``(alpha, beta)`` in radians of a (not necessarily unit) axis."""
+    v = np.asarray(axis, dtype=float)
+    v = v / np.linalg.norm(v)
+    return float(np.arctan2(v[1], v[0])), float(np.arccos(np.clip(v[2], -1.0, 1.0)))
+
+
+def rotate(axis: Array, angle_rad: Array, v: Array) -> Array:
+    """Rotate vectors ``v`` by ``angle`` about unit ``axis`` (Rodrigues), broadcasting.
+
+    ``v' = v cos a + (l x v) sin a + l (l . v)(1 - cos a)``; shapes broadcast as
+    ``axis (..., 3)``, ``angle (...)``, ``v (..., 3)``.
+    """
+    c = np.cos(angle_rad)
+    s = np.sin(angle_rad)
+    lx, ly, lz = axis[..., 0], axis[..., 1], axis[..., 2]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    k = (lx * vx + ly * vy + lz * vz) * (1.0 - c)
+    x = vx * c + (ly * vz - lz * vy) * s + lx * k
+    y = vy * c + (lz * vx - lx * vz) * s + ly * k
+    z = vz * c + (lx * vy - ly * vx) * s + lz * k
+    out = np.empty((*x.shape, 3), dtype=x.dtype)
+    out[..., 0], out[..., 1], out[..., 2] = x, y, z
+    return out
+
+
+def rotation_matrix(axis: ArrayLike, angle_rad: ArrayLike) -> Array:
+    """Rodrigues rotation matrices ``c I + s [l]x + (1 - c) l l^T``, shape ``(..., 3, 3)``."""
+    l = np.asarray(axis)
+    a = np.asarray(angle_rad)
+    c, s = np.cos(a), np.sin(a)
+    C = 1.0 - c
+    x, y, z = l[..., 0], l[..., 1], l[..., 2]
+    shape = np.broadcast_shapes(x.shape, a.shape)
+    R = np.empty((*shape, 3, 3), dtype=np.result_type(l, a, float))
+    R[..., 0, 0] = c + x * x * C
+    R[..., 0, 1] = x * y * C - z * s
+    R[..., 0, 2] = x * z * C + y * s
+    R[..., 1, 0] = y * x * C + z * s
+    R[..., 1, 1] = c + y * y * C
+    R[..., 1, 2] = y * z * C - x * s
+    R[..., 2, 0] = z * x * C - y * s
+    R[..., 2, 1] = z * y * C + x * s
+    R[..., 2, 2] = c + z * z * C
+    return R

@@ -1,0 +1,459 @@
+"""Dense continuous-time refinement of the motion from line-scan frames (beyond the paper).
+
+The frames are cut into surfels (:mod:`tumblescan.surfels`), each with a centroid ``a`` and a
+normal at the reference time that move with the motion ``x``. For a source surfel ``a_s`` of
+one frame and the nearest planar surfel ``a_t`` of another, the residual is the
+centroid-to-plane distance
+
+    r = n(x) . (a_s(x) - a_t(x)),    n = mean of the two normals (symmetric objective),
+    var r = s^2 (v_s / N_s + v_t / N_t + d^2 (v_ns + v_nt) / 4)
+
+with ``v`` the sensor's variance along ``n`` (range noise along the line of sight, angle noise
+across it, ``SensorNoise``), ``N`` the surfels' point counts, ``d`` the in-plane offset
+between the centroids, ``v_n`` the normals' tilt variances, and ``s`` a common scale estimated
+from the residuals. A centroid carries what its points say along the normal, so every point
+of a planar surfel enters the fit at the cost of one residual per partner frame. The fit
+minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
+Levenberg-Marquardt steps (kept only when they lower that cost), with correspondences
+re-found once points have moved and the surfels rebuilt after large steps.
+
+Three stages: every surfel matched in a neighbouring frame (right correspondences even from
+the initializer's rough start), then in random frames (the long time baselines fix the
+rates), then in every other frame from the converged start (each brings its own noise).
+
+Covariance: the sandwich ``H^-1 B H^-1`` with ``H = J^T W J``. A residual carries the noise of
+two surfels, so ``B`` clusters dyadically: ``B = sum_c G_c G_c^T - sum_i g_i g_i^T`` with
+``G_c`` the summed gradient of every residual touching surfel ``c`` as source or target.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..._typing import FloatArray, IntArray
+from ...geometry.rotations import axis_from_angles
+from ...target.motion import N_PARAMS, canonical_params
+from ..options import DenseConfig
+from ..sensor import SensorNoise
+from ..validation import canonical_cov
+from .surfels import DenseData, LineMapping, Surfels, build_surfels, normal_variance
+
+ALL_FREE = tuple(range(N_PARAMS))
+SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
+CAUCHY_C = 2.385  # Cauchy constant for 95 % efficiency under Gaussian noise
+MAX_NORMAL_ANGLE_COS = np.cos(np.radians(45.0))
+# Rebuild the surfels, and re-find correspondences, once points have moved this share of a surfel.
+SURFEL_REFRESH = 0.25
+REMATCH = 0.05
+PROBE_POINTS = 2000
+# Levenberg-Marquardt damping: start undamped, tighten on a rise of the cost, relax on success.
+LM_START = 0.0
+LM_FIRST_TIGHT = 1e-4
+LM_TIGHTEN = 10.0
+LM_RELAX = 3.0
+LM_TRIES = 10
+# Spin-only covariance: the centre's unobservable slide along the spin axis is removed by a
+# penalty this stiff (x trace H) before inverting.
+GAUGE_STIFFNESS = 1e6
+
+
+@dataclass(frozen=True)
+class DenseFit:
+    """Result of :func:`refine_dense`: canonical 9-vector, its 9x9 covariance, fit statistics.
+
+    rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
+    source or target); residuals: residuals used; surfels: distinct source surfels; points:
+    the points in them; scale: the common scale ``s`` of the residuals' model sigmas (about 1
+    when the motion fits; a wrong motion leaves residuals many times their model sigma).
+    """
+
+    x: FloatArray
+    cov: FloatArray
+    free: tuple[int, ...]
+    rms_m: float
+    frame_rms_m: FloatArray
+    residuals: int
+    surfels: int
+    points: int
+    iterations: int
+    scale: float
+
+    @property
+    def spin_only(self) -> bool:
+        return self.free == SPIN_ONLY_FREE
+
+
+@dataclass(frozen=True)
+class _Matches:
+    src: IntArray  # source surfel of each residual
+    dst: IntArray  # target surfel
+
+
+def _match(
+    data: DenseData,
+    mapping: LineMapping,
+    surf: Surfels,
+    src: IntArray,
+    partner: IntArray,
+    gate_m: float,
+) -> _Matches:
+    """Nearest planar surfel of the partner frame for each (source, partner) pair, if it lies
+    within ``gate_m`` and faces the same way as the source's own surfel."""
+    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    usable = surf.planar[src]
+    src, partner = src[usable], partner[usable]
+    mapped = anchor_ref[src]
+    src_all, dst_all = [], []
+    for b in range(data.n_frames):
+        sel = np.flatnonzero(partner == b)
+        targets = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        if len(sel) == 0 or len(targets) == 0:
+            continue
+        dist, nn = cKDTree(anchor_ref[targets]).query(mapped[sel], k=1, distance_upper_bound=gate_m, workers=-1)
+        ok = np.isfinite(dist)
+        dst = targets[nn[ok]]
+        s = sel[ok]
+        facing = np.einsum("ni,ni->n", normal_ref[src[s]], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS
+        src_all.append(src[s[facing]])
+        dst_all.append(dst[facing])
+    src_c = np.concatenate(src_all) if src_all else np.zeros(0, np.int64)
+    dst_c = np.concatenate(dst_all) if dst_all else np.zeros(0, np.int64)
+    return _Matches(src_c, dst_c)
+
+
+@dataclass(frozen=True)
+class _Linearized:
+    r: FloatArray  # centroid-to-plane residuals (m)
+    J: FloatArray  # their derivatives w.r.t. the free parameters
+    var: FloatArray  # model variance of each residual (m^2), before the common scale
+
+
+def _residuals(mapping: LineMapping, surf: Surfels, m: _Matches) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Centroid-to-plane residuals, the plane normals at ``T`` and the squared in-plane offsets.
+
+    The plane's normal is the mean of both surfels' (a symmetric objective): the normal's
+    noise times the in-plane offset between the centroids is the largest term of a residual's
+    variance, and the mean halves it."""
+    p = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
+    q = mapping.apply(surf.anchor_obs[m.dst], surf.line[m.dst])
+    n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst]) + mapping.rotate(
+        surf.normal_obs[m.src], surf.line[m.src]
+    )
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d = p - q
+    r = np.einsum("ni,ni->n", n, d)
+    return np.asarray(r), n, np.asarray(np.einsum("ni,ni->n", d, d) - r**2)
+
+
+def _linearize(data: DenseData, mapping: LineMapping, surf: Surfels, m: _Matches, noise: SensorNoise) -> _Linearized:
+    xyz, line = surf.anchor_obs[m.src], surf.line[m.src]
+    r, n, offset2 = _residuals(mapping, surf, m)
+    J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
+    # The source centroid's noise along the normal, seen from the source's own sensor; the
+    # target centroid's; and the normal's tilt over the offset between the two.
+    n_src_obs = np.einsum("nji,nj->ni", mapping.Rt[line], n)
+    var = (
+        normal_variance(noise, xyz, n_src_obs) / surf.count[m.src]
+        + surf.var_m2[m.dst] / surf.count[m.dst]
+        + offset2 * (surf.normal_var_rad2[m.src] + surf.normal_var_rad2[m.dst]) / 4
+    )
+    return _Linearized(np.asarray(r), J, np.asarray(var))
+
+
+def _cauchy_weights(e: FloatArray, scale: float) -> FloatArray:
+    return np.asarray(1.0 / (1.0 + (e / (CAUCHY_C * scale)) ** 2))
+
+
+def _robust_sigma(r: FloatArray) -> float:
+    return float(1.4826 * np.median(np.abs(r))) if len(r) else 0.0
+
+
+def _cauchy_cost(e: FloatArray, scale: float) -> float:
+    c2 = (CAUCHY_C * scale) ** 2
+    return float(0.5 * c2 * np.sum(np.log1p(e**2 / c2)))
+
+
+def _weights(lin: _Linearized) -> tuple[FloatArray, float]:
+    """Weights ``cauchy(e / s) / var`` of the normalized residuals ``e = r / sqrt(var)``, and ``s``."""
+    e = lin.r / np.sqrt(lin.var)
+    scale = max(_robust_sigma(e), 1e-12)
+    return _cauchy_weights(e, scale) / lin.var, scale
+
+
+@dataclass
+class _Problem:
+    data: DenseData
+    free: tuple[int, ...]
+    base: FloatArray
+    config: DenseConfig
+    noise: SensorNoise
+    gauge_point: FloatArray | None
+
+    def full(self, z: FloatArray) -> FloatArray:
+        x = self.base.copy()
+        x[list(self.free)] = z
+        return x
+
+
+def refine_dense(
+    data: DenseData,
+    x0: FloatArray,
+    *,
+    spin_only: bool = False,
+    config: DenseConfig | None = None,
+    noise: SensorNoise | None = None,
+    seed: int = 0,
+    converged: bool = False,
+    gauge_point: FloatArray | None = None,
+    on_iteration: Callable[[int, int], None] | None = None,
+) -> DenseFit:
+    """Refine ``x0`` (a 9-vector at the reference time of ``data.tau_s``); see the module docstring.
+
+    data: the frames (:func:`prepare`). spin_only: fix the precession rate at 0 and keep the
+    centre on the spin axis, at the point nearest the points' centroid. noise: the sensor's noise model
+    (weights, planarity test, correspondence gate). converged: ``x0`` is already a solution
+    (of a superset of these frames, say): run the last stage only, from the tightest gate.
+    gauge_point: spin-only, the point whose nearest axis point is reported as the centre
+    (default: the points' centroid at ``T``); give the same one to compare two fits.
+    on_iteration(step, max_steps): called after each step; it may raise to stop.
+    """
+    cfg = config or DenseConfig()
+    sensor = noise or SensorNoise()
+    free = SPIN_ONLY_FREE if spin_only else ALL_FREE
+    base = np.asarray(x0, dtype=float).copy()
+    rng = np.random.default_rng(seed)
+    gauge = None
+    if spin_only:
+        base[3:6] = 0.0
+        probe = _probe(data)
+        gauge = (
+            np.asarray(gauge_point, dtype=float)
+            if gauge_point is not None
+            else LineMapping(base, data.tau_s, free).apply(data.xyz_m[probe], data.line[probe]).mean(axis=0)
+        )
+    problem = _Problem(data, free, base, cfg, sensor, gauge)
+    problem.base = _on_gauge(problem, base)
+    z = problem.base[list(free)]
+    step = 0
+    cells = np.arange(len(data.cell_frame), dtype=np.int64)
+    stages = [
+        # 1. Neighbouring frames only: right correspondences even from a rough start.
+        (_partners(data, cells, rng, window=cfg.near_window, k=1), cfg.max_iterations),
+        # 2. Any frame: long baselines pin the rates down.
+        (_partners(data, cells, rng, window=None, k=cfg.partners), cfg.max_iterations),
+        # 3. More partners from the converged start: each brings its own target noise.
+        (_partners(data, cells, rng, window=None, k=cfg.fine_partners), cfg.fine_iterations),
+    ]
+    surf: Surfels | None = None
+    gate = max(data.extent_m / 20, 5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+    if converged:
+        stages, gate = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+    total = sum(iterations for _, iterations in stages)
+    for (src, partner), iterations in stages:
+        z, matches, surf, gate, step = _iterate(
+            problem, z, src, partner, surf, gate, iterations, step=step, total=total, on_iteration=on_iteration
+        )
+    assert surf is not None
+    return _finish(problem, z, matches, surf, step)
+
+
+def _partners(
+    data: DenseData, src: IntArray, rng: np.random.Generator, *, window: int | None, k: int
+) -> tuple[IntArray, IntArray]:
+    """``k`` random other frames for each source surfel (within ``window`` frames of its own, if
+    given): the pairs as parallel arrays ``(source, partner frame)``."""
+    F = data.n_frames
+    reach = F - 1 if window is None else min(window, F - 1)
+    own = data.cell_frame[src]
+    if window is None and k >= F - 1:
+        # Every other frame, in order: nothing left to chance.
+        b = (own[:, None] + np.arange(1, F)[None, :]) % F
+        return np.repeat(src, F - 1), b.ravel()
+    offsets = np.concatenate([-np.arange(reach, 0, -1), np.arange(1, reach + 1)])
+    out_src, out_partner = [], []
+    for _ in range(min(k, 2 * reach)):
+        b = own + offsets[rng.integers(0, len(offsets), len(src))]
+        # Offsets past either end fold back inside (a frame never pairs with itself).
+        b = np.where(b < 0, -b, b)
+        b = np.where(b >= F, 2 * (F - 1) - b, b)
+        ok = (b != own) & (b >= 0) & (b < F)
+        out_src.append(src[ok])
+        out_partner.append(b[ok])
+    return np.concatenate(out_src), np.concatenate(out_partner)
+
+
+def _iterate(
+    problem: _Problem,
+    z: FloatArray,
+    src: IntArray,
+    partner: IntArray,
+    surf: Surfels | None,
+    gate: float,
+    iterations: int,
+    *,
+    step: int,
+    total: int,
+    on_iteration: Callable[[int, int], None] | None,
+) -> tuple[FloatArray, _Matches, Surfels, float, int]:
+    """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
+    distance to a matched surfel's centroid, tightened as the frames come together."""
+    cfg, data, noise = problem.config, problem.data, problem.noise
+    floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
+    probe = _probe(data)
+    mapping = LineMapping(problem.full(z), data.tau_s, problem.free)
+    if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
+        surf = build_surfels(data, mapping, noise)
+    matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+    lam = LM_START
+    for _ in range(iterations):
+        lin = _linearize(data, mapping, surf, matches, noise)
+        w, scale = _weights(lin)
+        sw = np.sqrt(w)
+        rows = lin.J * sw[:, None]
+        H, g = rows.T @ rows, -rows.T @ (lin.r * sw)
+        taken = _damped_step(problem, z, H, g, lam, lin, scale, matches, surf)
+        if taken is None:
+            break
+        dz, lam, mapping = taken
+        # A step far below the parameters' own uncertainty changes nothing that matters.
+        sd = scale * np.sqrt(np.diag(np.linalg.pinv(H, rcond=1e-12)))
+        moved = float(np.max(np.abs(dz) / np.maximum(sd, 1e-300)))
+        z = z + dz
+        step += 1
+        if on_iteration is not None:
+            on_iteration(step, total)
+        if moved < cfg.tolerance:
+            break
+        # Tighten the gate as the frames come together. Surfels move rigidly with their lines,
+        # so they are rebuilt only after large steps; correspondences once points have moved.
+        gate = max(floor, min(gate, 4 * CAUCHY_C * _robust_sigma(lin.r)))
+        if _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
+            surf = build_surfels(data, mapping, noise)
+        if (
+            surf.mapping is mapping
+            or gate < 0.9 * matched_gate
+            or _shift(data, probe, matched_at, mapping) > REMATCH * data.surfel_m
+        ):
+            matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+
+    return z, matches, surf, gate, step
+
+
+def _damped_step(
+    problem: _Problem,
+    z: FloatArray,
+    H: FloatArray,
+    g: FloatArray,
+    lam: float,
+    lin: _Linearized,
+    scale: float,
+    matches: _Matches,
+    surf: Surfels,
+) -> tuple[FloatArray, float, LineMapping] | None:
+    """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
+    last one) that lowers the Cauchy cost on these correspondences; None when none does."""
+    data = problem.data
+    before = _cauchy_cost(lin.r / np.sqrt(lin.var), scale)
+    D = np.diag(np.diag(H))
+    for _ in range(LM_TRIES):
+        step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
+        x = _on_gauge(problem, problem.full(z + step))
+        dz = x[list(problem.free)] - z
+        mapping = LineMapping(x, data.tau_s, problem.free)
+        r = _residuals(mapping, surf, matches)[0]
+        after = _cauchy_cost(r / np.sqrt(lin.var), scale)
+        if after <= before:
+            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
+        lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
+    return None
+
+
+def _probe(data: DenseData) -> IntArray:
+    """About ``PROBE_POINTS`` points spread evenly over the cloud."""
+    return np.arange(0, len(data.xyz_m), max(1, len(data.xyz_m) // PROBE_POINTS), dtype=np.int64)
+
+
+def _shift(data: DenseData, probe: IntArray, before: LineMapping, after: LineMapping) -> float:
+    """Largest displacement of the probe points at ``T`` between two motions (m)."""
+    xyz, line = data.xyz_m[probe], data.line[probe]
+    return float(np.max(np.linalg.norm(after.apply(xyz, line) - before.apply(xyz, line), axis=1), initial=0.0))
+
+
+def _gauge_row(problem: _Problem, x: FloatArray) -> FloatArray | None:
+    """Spin-only: ``d/dz [l_s . (O - gauge_point)]`` (the centre's slide along the spin axis), else None."""
+    if problem.gauge_point is None:
+        return None
+    row = np.zeros(len(problem.free))
+    row[list(problem.free).index(6) :] = axis_from_angles(x[0], x[1])
+    return row
+
+
+def _on_gauge(problem: _Problem, x: FloatArray) -> FloatArray:
+    """Spin-only: the centre slid along the spin axis to the point nearest the gauge point.
+    Any point of the axis gives the same motion, so the cost does not change."""
+    if problem.gauge_point is None:
+        return x
+    l_s = axis_from_angles(x[0], x[1])
+    out = x.copy()
+    out[6:9] -= l_s * float(l_s @ (x[6:9] - problem.gauge_point))
+    return out
+
+
+def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps: int) -> DenseFit:
+    """Covariance and residual statistics at ``z`` with the last step's correspondences."""
+    data = problem.data
+    x = problem.full(z)
+    mapping = LineMapping(x, data.tau_s, problem.free)
+    lin = _linearize(data, mapping, surf, m, problem.noise)
+    w, scale = _weights(lin)
+    cov_free = _sandwich(lin.J, lin.r, w, m, _gauge_row(problem, x))
+    cov9 = np.zeros((N_PARAMS, N_PARAMS))
+    idx = np.array(problem.free)
+    cov9[np.ix_(idx, idx)] = cov_free
+    inlier = np.abs(lin.r) <= 3 * scale * np.sqrt(lin.var)
+    sources = np.unique(m.src)
+    r_in = lin.r[inlier]
+    frame_sq = np.zeros(data.n_frames)
+    frame_n = np.zeros(data.n_frames)
+    for fr in (data.cell_frame[m.src], data.cell_frame[m.dst]):
+        np.add.at(frame_sq, fr[inlier], r_in**2)
+        np.add.at(frame_n, fr[inlier], 1)
+    frame_rms = np.sqrt(frame_sq / np.maximum(frame_n, 1))
+    frame_rms[frame_n == 0] = np.nan
+    return DenseFit(
+        x=canonical_params(x),
+        cov=canonical_cov(x, cov9),
+        free=problem.free,
+        rms_m=float(np.sqrt(np.mean(r_in**2))) if len(r_in) else float("nan"),
+        frame_rms_m=frame_rms,
+        residuals=len(lin.r),
+        surfels=len(sources),
+        points=int(surf.count[sources].sum()),
+        iterations=steps,
+        scale=scale,
+    )
+
+
+def _sandwich(J: FloatArray, r: FloatArray, w: FloatArray, m: _Matches, gauge_row: FloatArray | None) -> FloatArray:
+    """``H^-1 B H^-1`` with ``H = J^T W J`` and ``B`` the dyadic-cluster sum: a residual carries the
+    noise of two surfels (source and target), so the gradients ``g_i`` of residuals sharing a
+    surfel in either role are correlated. ``B = sum_c G_c G_c^T - sum_i g_i g_i^T`` with ``G_c``
+    the sum over residuals touching surfel ``c`` (each residual touches two)."""
+    Jw = J * w[:, None]
+    H = J.T @ Jw
+    g = Jw * r[:, None]
+    size = int(max(m.src.max(initial=-1), m.dst.max(initial=-1))) + 1
+    G = np.zeros((size, J.shape[1]))
+    np.add.at(G, m.src, g)
+    np.add.at(G, m.dst, g)
+    B = G.T @ G - g.T @ g
+    if gauge_row is not None:
+        # The centre's slide along the spin axis is fixed (see _on_gauge): no variance there.
+        H = H + np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(H)
+    Hinv = np.linalg.pinv(H, rcond=1e-12)
+    return np.asarray(Hinv @ B @ Hinv, dtype=float)

@@ -1,0 +1,76 @@
+"""Options of the line-scan estimators, one model per input form.
+
+Tracks and frames share the model choice, the reference time, the sensor noise, the seed and
+the validation settings; the search over starts (strategy, objective, swarm) belongs to
+tracks, the frame period and the dense fit to frames. An option given to the form it does
+not apply to is refused (the models forbid extra names), never ignored. ``EstimateOptions``
+carries every option, for library users who call either estimator.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .sensor import SensorNoise
+from .swarm import SwarmConfig
+from .tracks import MIN_FRAMES
+
+Strategy = Literal["auto", "lm", "swarm"]
+Objective = Literal["ml", "pairwise"]
+ModelChoice = Literal["auto", "spin-precession", "spin-only"]
+
+
+class DenseConfig(BaseModel):
+    """Sampling and iteration settings of the dense refinement (lengths in metres)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    surfel_m: float | None = Field(None, gt=0, description="surfel size; default (estimate_from_frames): extent / 100")
+    partners: int = Field(2, ge=1, le=100, description="other frames each surfel is matched in (second stage)")
+    fine_partners: int = Field(
+        14, ge=1, le=100, description="other frames each surfel is matched in (last stage; all of them if fewer)"
+    )
+    near_window: int = Field(2, ge=1, le=100, description="frames either side matched in the first stage")
+    max_iterations: int = Field(15, ge=1, le=1000, description="Gauss-Newton steps in each of the first two stages")
+    fine_iterations: int = Field(6, ge=1, le=1000, description="Gauss-Newton steps in the last stage")
+    tolerance: float = Field(
+        0.1, gt=0, le=1, description="stop a stage when no parameter moves more than this many standard deviations"
+    )
+
+
+class CommonOptions(BaseModel):
+    """What both estimators take."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    model: ModelChoice = Field("auto", description="auto chooses spin-only vs spin-precession by an F-test")
+    reference_time_s: float | None = Field(None, allow_inf_nan=False, description="default: first observation")
+    seed: int = Field(0, ge=0, le=2**63 - 1)
+    sensor: SensorNoise | None = Field(None, description="overrides the noise declared with the input")
+    validation_frames: int | None = Field(None, ge=MIN_FRAMES, description="frames in the second solve")
+    significance: float = Field(1e-3, gt=0, lt=0.5, description="level of the model and similarity tests")
+
+
+class TracksOptions(CommonOptions):
+    """Options of :func:`estimate_motion` (feature tracks)."""
+
+    strategy: Strategy = Field("auto", description="auto: initializer if it validates, else swarm; then LM")
+    objective: Objective = Field("ml", description="ml (maximum likelihood) or pairwise (paper eq. 10)")
+    swarm: SwarmConfig = SwarmConfig()
+    max_attempts: int = Field(3, ge=1, le=20)
+    reject_outliers: bool = True
+
+
+class FramesOptions(CommonOptions):
+    """Options of :func:`estimate_from_frames` (dense frames)."""
+
+    frame_period_s: float | None = Field(
+        None, gt=0, allow_inf_nan=False, description="frames input without frame indices: the scanner's frame period"
+    )
+    dense: DenseConfig = Field(DenseConfig(), description="sampling and iterations of the dense fit")
+
+
+class EstimateOptions(TracksOptions, FramesOptions):
+    """Every option of both estimators (library use; the service takes one form's options)."""

@@ -1,0 +1,75 @@
+"""Ground truth of a simulation as JSON, and its comparison with an estimate."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import MalformedInputError
+from ..target.motion import Motion
+from .result import MotionResult
+
+
+def motion_to_json(motion: Motion) -> dict[str, Any]:
+    m = motion.canonical()
+    return {
+        "reference_time_s": m.reference_time_s,
+        "spin_axis": list(m.spin_axis),
+        "spin_rate_deg_s": float(np.degrees(m.spin_rate_rad_s)),
+        "precession_axis": list(m.precession_axis),
+        "precession_rate_deg_s": float(np.degrees(m.precession_rate_rad_s)),
+        "center_m": list(m.center_m),
+    }
+
+
+def motion_from_json(obj: dict[str, Any]) -> Motion:
+    return Motion.from_degrees(
+        spin_axis=obj["spin_axis"],
+        spin_rate_deg_s=obj["spin_rate_deg_s"],
+        precession_axis=obj["precession_axis"],
+        precession_rate_deg_s=obj["precession_rate_deg_s"],
+        center_m=obj["center_m"],
+        reference_time_s=obj["reference_time_s"],
+    )
+
+
+def angle_deg(a: Any, b: Any) -> float:
+    """Angle between two vectors, accurate near 0 (atan2 of cross and dot)."""
+    u, v = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(u, v)), u @ v)))
+
+
+def errors_against(result: MotionResult, truth: Motion) -> dict[str, float]:
+    """Estimate minus truth at the estimate's reference time: axis angles in degrees,
+    rates in deg/s, centre distance in metres (spin-only: distance of the truth's centre
+    from the estimated spin axis)."""
+    T = result.reference_time_s
+    spin_axis_true = truth.spin_axis_at(T)
+    out = {
+        "spin_axis_deg": angle_deg(result.spin.axis, spin_axis_true),
+        "spin_rate_deg_s": result.spin.rate_deg_s - float(np.degrees(truth.spin_rate_rad_s)),
+    }
+    c_est = np.asarray(result.precession.center_m)
+    c_true = np.asarray(truth.center_m)
+    if result.precession.axis is not None:
+        out["precession_axis_deg"] = angle_deg(result.precession.axis, truth.precession_axis)
+        out["precession_rate_deg_s"] = result.precession.rate_deg_s - float(np.degrees(truth.precession_rate_rad_s))
+        out["center_m"] = float(np.linalg.norm(c_est - c_true))
+    else:
+        d = c_true - c_est
+        axis = np.asarray(result.spin.axis)
+        out["center_m"] = float(np.linalg.norm(d - axis * (axis @ d)))
+    return out
+
+
+def load_truth(path: Path) -> Motion:
+    """The ``motion`` of a ``truth.json`` written by ``tumblescan simulate``."""
+    try:
+        return motion_from_json(json.loads(path.read_text())["motion"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise MalformedInputError(
+            f"'truth' is not a simulation truth file ({type(exc).__name__}: {exc})", field="truth"
+        ) from None
