@@ -5,10 +5,12 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict
 
 from .linescan import MotionResult
+from .marker_pose import MarkerPoseResult
 
 # Kind name -> result model (one line per kind, as in the service's registry).
 RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
+    "marker-pose-graph": MarkerPoseResult,
 }
 
 
@@ -22,4 +24,4 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "MotionResult", "UnknownResult", "result_model"]
+__all__ = ["RESULT_MODELS", "MarkerPoseResult", "MotionResult", "UnknownResult", "result_model"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from . import linescan, service
+from . import linescan, marker_pose, service
 
 app = typer.Typer(
     add_completion=False,
@@ -20,6 +20,7 @@ app = typer.Typer(
 # One group per kind, named as the kind (one line per kind, as in jobs/registry.py).
 KIND_GROUPS: list[tuple[str, typer.Typer]] = [
     ("linescan-motion", linescan.app),
+    ("marker-pose-graph", marker_pose.app),
 ]
 for _name, _group in KIND_GROUPS:
     app.add_typer(_group, name=_name)

@@ -18,9 +18,11 @@ class UnknownKindError(InputError):
 def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
     from .kinds.linescan import LinescanMotion
+    from .kinds.marker_pose import MarkerPoseGraph
 
     listed: list[JobKind] = [
         LinescanMotion(),
+        MarkerPoseGraph(),
     ]
     return {k.name: k for k in listed}
 
