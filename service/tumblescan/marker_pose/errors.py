@@ -5,16 +5,22 @@ malformed documents, bad options) come from ``tumblescan.errors``."""
 from __future__ import annotations
 
 from ..errors import (
-    DuplicateObservationError,
     InputError,
     InvalidOptionError,
     LimitExceededError,
     MalformedInputError,
     NonFiniteValueError,
     TimeOrderError,
-    TooFewFramesError,
     UnknownFieldError,
 )
+
+
+class DuplicateObservationError(InputError):
+    code = "duplicate_observation"
+
+
+class TooFewFramesError(InputError):
+    code = "too_few_frames"
 
 
 class UnsupportedUnitsError(InputError):
