@@ -46,10 +46,16 @@ class MarkerPoseGraph:
                 InputPart("layout", "marker layout {markers: [{id, xyz}]}", ("json",), required=False),
             ),
             json_input=True,
+            json_schema={
+                "type": "object",
+                "description": "a tumblescan.markers.v1 document (see docs/marker_pose.md)",
+                "properties": {"format": {"const": "tumblescan.markers.v1"}, "observations": {"type": "array"}},
+                "required": ["observations"],
+            },
         ),
     )
     result_model = _result()
-    artifacts = (ArtifactSpec("report", "text/html", "the HTML report"),)
+    artifacts: tuple[ArtifactSpec, ...] = ()  # the HTML report is served by the job layer
     limits_model = _limits()
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
@@ -79,13 +85,10 @@ class MarkerPoseGraph:
     def run(self, ctx: JobContext) -> JobOutput:
         from ...marker_pose.options import MarkerPoseOptions
         from ...marker_pose.pipeline import run
-        from ...marker_pose.report import build_report
 
         options = MarkerPoseOptions.model_validate(ctx.options)
         result = run(ctx.inputs["markers"], layout=ctx.inputs.get("layout"), options=options, progress=ctx.progress)
-        ctx.progress("report", 0.95)
-        ctx.output_path("report.html").write_text(build_report(result, f"Job {ctx.job_id}"))
-        return JobOutput(result=result.model_dump(mode="json"), artifacts={"report": "report.html"})
+        return JobOutput(result=result.model_dump(mode="json"))
 
     def report(self, job: FinishedJob) -> str:
         from ...marker_pose.report import build_report
