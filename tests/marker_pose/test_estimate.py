@@ -38,6 +38,17 @@ def test_layout_is_bootstrapped_when_none_is_given() -> None:
     assert ev["coverage"] >= 0.98
 
 
+def test_constant_velocity_prior_smooths_below_the_per_frame_bound() -> None:
+    sim = simulate(SimConfig(target="kite", frames=300), 2)
+    data = markers_from_json(sim.document())
+    result = estimate_poses(data, MarkerPoseOptions(motion_prior="constant_velocity"))
+    ev = evaluate(result, sim.truth())
+    assert ev["ratio"] < 0.6  # smoothing over frames beats the per-frame bound
+    assert 0.25 <= ev["nees_over_6"] <= 4  # and the graph's covariances say so honestly
+    assert ev["coverage"] >= 0.98
+    assert result.graph.factors["motion"] > 250
+
+
 def test_paper_chain_is_worse_than_ours() -> None:
     sim = simulate(SimConfig(target="kite", frames=300), 3)
     data = markers_from_json(sim.document())

@@ -99,7 +99,7 @@ def _our_graph(
     cov = frame_covariances(graph.R, data.obs_frame, assoc.obs_marker, graph.layout_m, sigma, assoc.measured)
     if gauge is not None:
         cov = np.where(np.isnan(graph.cov), cov, graph.cov)
-    q_rot, q_trans = auto_psd(data.t_s, graph.R, graph.t, assoc.measured, _rot_sigma(cov), sigma)
+    q_rot, q_trans = auto_psd(data.t_s, graph.R, graph.t, assoc.measured, _sigma(cov, 0), _sigma(cov, 3))
     R, t, C, status, info = motion_graph(
         data.t_s,
         graph.R,
@@ -122,6 +122,8 @@ def _our_graph(
     return GraphResult(R, t, C, status, graph.layout_m, graph.layout_sigma_m, graph.info)
 
 
-def _rot_sigma(cov: FloatArray) -> float:
+def _sigma(cov: FloatArray, start: int) -> float:
+    """Typical per-axis 1-sigma of the rotation (start 0) or position (start 3) block."""
     ok = ~np.isnan(cov[:, 0, 0])
-    return float(np.sqrt(np.median(np.trace(cov[ok, :3, :3], axis1=1, axis2=2) / 3.0))) if ok.any() else 0.01
+    block = cov[ok, start : start + 3, start : start + 3]
+    return float(np.sqrt(np.median(np.trace(block, axis1=1, axis2=2) / 3.0))) if ok.any() else 0.01

@@ -21,6 +21,7 @@ from .._typing import BoolArray, FloatArray, IntArray
 from .geometry import skew
 
 STATUS_MEASURED, STATUS_BRIDGED, STATUS_MISSING = "measured", "bridged", "missing"
+WINDOW_S = 0.2  # window over which the motion prior's PSD is read from the per-frame poses
 
 
 @dataclass
@@ -274,18 +275,26 @@ def motion_graph(
     return Rout, tout, cout, status, info
 
 
-def auto_psd(t_s: FloatArray, R: FloatArray, t: FloatArray, measured: BoolArray, sigma_rot: float, sigma_pos: float) -> tuple[float, float]:
-    """White-noise-acceleration PSDs from the measured poses: velocity changes over a 0.2 s window,
-    less what the noise alone would give (``var(dv) = q * window``)."""
+def auto_psd(
+    t_s: FloatArray,
+    R: FloatArray,
+    t: FloatArray,
+    measured: BoolArray,
+    sigma_rot: float,
+    sigma_pos: float,
+    window_s: float = WINDOW_S,
+) -> tuple[float, float]:
+    """White-noise-acceleration PSDs (rotation [rad^2/s^3], translation [m^2/s^3]) from the measured
+    poses: a white acceleration of PSD q changes the velocity by ``var = q T`` per axis over ``T``.
+    Velocities are differenced over windows of ``window_s``, less what the pose noise alone gives
+    (``6 sigma^2 / T^2`` per axis). sigma_rot [rad], sigma_pos [m]: per-axis pose noise."""
     from .geometry import log_so3
 
     k = np.flatnonzero(measured)
     if len(k) < 8:
         return 1.0, 0.1
     dt = float(np.median(np.diff(t_s[k])))
-    w = max(2, int(round(0.2 / max(dt, 1e-6))))
-    if len(k) < 3 * w:
-        w = max(1, len(k) // 3)
+    w = max(1, min(int(round(window_s / max(dt, 1e-9))), len(k) // 3))
     a, b, c = k[: -2 * w], k[w:-w], k[2 * w :]
     T1, T2 = t_s[b] - t_s[a], t_s[c] - t_s[b]
     v1 = (t[b] - t[a]) / T1[:, None]
@@ -293,8 +302,8 @@ def auto_psd(t_s: FloatArray, R: FloatArray, t: FloatArray, measured: BoolArray,
     w1 = log_so3(R[b] @ np.transpose(R[a], (0, 2, 1))) / T1[:, None]
     w2 = log_so3(R[c] @ np.transpose(R[b], (0, 2, 1))) / T2[:, None]
     span = float(np.median(T1))
-    noise_v = 4.0 * sigma_pos**2 / span**2
-    noise_w = 4.0 * sigma_rot**2 / span**2
-    q_t = max(float(np.mean(np.sum((v2 - v1) ** 2, axis=1))) / 3.0 - noise_v, 1e-8) / span
-    q_r = max(float(np.mean(np.sum((w2 - w1) ** 2, axis=1))) / 3.0 - noise_w, 1e-8) / span
-    return q_r, q_t
+    per_axis_v = float(np.mean((v2 - v1) ** 2)) - 6.0 * sigma_pos**2 / span**2
+    per_axis_w = float(np.mean((w2 - w1) ** 2)) - 6.0 * sigma_rot**2 / span**2
+    floor_v = 0.1 * 6.0 * sigma_pos**2 / span**2
+    floor_w = 0.1 * 6.0 * sigma_rot**2 / span**2
+    return max(per_axis_w, floor_w) / span, max(per_axis_v, floor_v) / span
