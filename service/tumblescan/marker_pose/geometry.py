@@ -49,12 +49,23 @@ def kabsch(p_body_m: FloatArray, y_world_m: FloatArray) -> tuple[FloatArray, Flo
     p_body_m: (N, 3) body coordinates [m]; y_world_m: (N, 3) measured world coordinates [m], N >= 3.
     Returns (R_world_body (3, 3), t_world_m (3,)).
     """
-    pc, yc = p_body_m.mean(axis=0), y_world_m.mean(axis=0)
-    H = (p_body_m - pc).T @ (y_world_m - yc)
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
-    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    n = len(p_body_m)
+    pc = p_body_m.sum(axis=0) / n
+    yc = y_world_m.sum(axis=0) / n
+    U, _, Vt = np.linalg.svd((p_body_m - pc).T @ (y_world_m - yc))
+    R = Vt.T @ U.T
+    if _det3(R) < 0:  # a reflection: flip the weakest axis
+        Vt[2] *= -1.0
+        R = Vt.T @ U.T
     return R, yc - R @ pc
+
+
+def _det3(M: FloatArray) -> float:
+    return float(
+        M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+        - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+        + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0])
+    )
 
 
 def kabsch_batch(p_body_m: FloatArray, y_world_m: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:

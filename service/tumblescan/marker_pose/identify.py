@@ -20,7 +20,8 @@ from .._typing import BoolArray, FloatArray, IntArray
 from .geometry import kabsch
 from .markers_io import MarkerInput
 
-CONFIRM_FRAMES = 2  # a new track is used once it sat on the same marker this many frames in a row
+FRAME_ALPHA = 1e-3  # false-alarm rate of the frame's chi-square test
+CONFIRM_FRAMES = 1  # a new track is used once it sat on the same marker this many frames in a row
 MISS_FRAMES = 3  # a track that missed its marker this many frames in a row loses its identity
 PREDICT_FRAMES = 5  # a pose this recent predicts where the markers are
 RECENT_FRAMES = 25  # a search result must be within reach of a pose this recent
@@ -45,7 +46,9 @@ class Gates:
     def make(cls, sigma_m: float, outlier_sigma: float, max_dof: int = 3 * 300) -> Gates:
         from scipy.stats import chi2, norm
 
-        alpha = 2.0 * float(norm.sf(outlier_sigma))
+        # A single marker is tested at the outlier gate; the frame as a whole at FRAME_ALPHA, since
+        # an error a rigid fit absorbs (out of a planar layout's plane) shows only in the sum.
+        alpha = min(FRAME_ALPHA, 2.0 * float(norm.sf(outlier_sigma)) * 1e3)
         dof = np.arange(max_dof + 1)
         thr = np.where(dof > 0, chi2.isf(alpha, np.maximum(dof, 1)), 0.0)
         return cls(sigma_m, outlier_sigma, np.asarray(thr))
@@ -78,26 +81,28 @@ def fit_robust(p_body_m: FloatArray, y_m: FloatArray, gates: Gates) -> Fit | Non
     if n < 3:
         return None
     R, t = kabsch(p_body_m, y_m)
-    keep = np.linalg.norm(y_m - p_body_m @ R.T - t, axis=1) <= gates.gate_m
-    if not keep.all() and n >= 4:
-        best = keep
-        for c in combinations(range(n), 3):
-            Rc, tc = kabsch(p_body_m[list(c)], y_m[list(c)])
-            k = np.linalg.norm(y_m - p_body_m @ Rc.T - tc, axis=1) <= gates.gate_m
-            if k.sum() > best.sum():
-                best = k
-                if k.sum() == n - 1:
-                    break
-        keep = best
-    for _ in range(n):
-        if keep.sum() < 3:
-            return None
-        R, t = kabsch(p_body_m[keep], y_m[keep])
-        r = np.linalg.norm(y_m - p_body_m @ R.T - t, axis=1)
-        worst = int(np.argmax(np.where(keep, r, -1.0)))
-        if r[worst] <= gates.gate_m:
-            break
-        keep[worst] = False
+    r = np.sqrt(np.sum((y_m - p_body_m @ R.T - t) ** 2, axis=1))
+    keep = r <= gates.gate_m
+    if not keep.all():
+        if n >= 4:
+            best = keep
+            for c in combinations(range(n), 3):
+                Rc, tc = kabsch(p_body_m[list(c)], y_m[list(c)])
+                k = np.linalg.norm(y_m - p_body_m @ Rc.T - tc, axis=1) <= gates.gate_m
+                if k.sum() > best.sum():
+                    best = k
+                    if k.sum() == n - 1:
+                        break
+            keep = best
+        for _ in range(n):
+            if keep.sum() < 3:
+                return None
+            R, t = kabsch(p_body_m[keep], y_m[keep])
+            r = np.linalg.norm(y_m - p_body_m @ R.T - t, axis=1)
+            worst = int(np.argmax(np.where(keep, r, -1.0)))
+            if r[worst] <= gates.gate_m:
+                break
+            keep[worst] = False
     chi2 = float(np.sum(r[keep] ** 2) / gates.sigma_m**2)
     if gates.chi2_ok(chi2, int(keep.sum())):
         return Fit(R, t, keep, chi2, True)
@@ -190,6 +195,7 @@ class Association:
     t: FloatArray
     measured: BoolArray
     chi2: FloatArray
+    ambiguous: BoolArray
     identity_changes: int = 0
     label_disagreements: int = 0
     searches: int = 0
@@ -210,7 +216,44 @@ class _Tracks:
 
 
 def associate(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Association:
-    """Identify every frame's markers against ``layout_m`` (M, 3) and fit each frame's pose."""
+    """Identify every frame's markers against ``layout_m`` (M, 3) and fit each frame's pose: a
+    forward pass, then a backward one for the frames the forward pass left out (before the first
+    identification, or ambiguous until a later frame told the tracks apart)."""
+    fwd = _associate_pass(data, layout_m, gates)
+    if fwd.measured.all():
+        return fwd
+    rev = _reversed(data)
+    bwd = _associate_pass(rev, layout_m, gates)
+    F, N = data.n_frames, len(data.xyz_m)
+    take = ~fwd.measured & ~fwd.ambiguous & bwd.measured[::-1] & ~bwd.ambiguous[::-1]
+    fwd.R[take], fwd.t[take], fwd.chi2[take] = bwd.R[::-1][take], bwd.t[::-1][take], bwd.chi2[::-1][take]
+    fwd.measured |= take
+    obs = take[data.obs_frame]
+    fwd.obs_marker[obs] = bwd.obs_marker[::-1][obs]
+    fwd.obs_status[obs] = bwd.obs_status[::-1][obs]
+    fwd.searches += bwd.searches
+    fwd.ambiguous |= bwd.ambiguous[::-1] & ~fwd.measured
+    assert len(fwd.obs_marker) == N and len(fwd.R) == F
+    return fwd
+
+
+def _reversed(data: MarkerInput) -> MarkerInput:
+    """The same input with time running backwards (observation order reversed)."""
+    from dataclasses import replace
+
+    F = data.n_frames
+    return replace(
+        data,
+        frames=data.frames[::-1].copy(),
+        t_s=data.t_s[::-1].copy(),
+        obs_frame=(F - 1 - data.obs_frame)[::-1].copy(),
+        obs_track=data.obs_track[::-1].copy(),
+        xyz_m=data.xyz_m[::-1].copy(),
+        obs_label=data.obs_label[::-1].copy(),
+    )
+
+
+def _associate_pass(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Association:
     F, N = data.n_frames, len(data.xyz_m)
     out = Association(
         obs_marker=np.full(N, -1, dtype=np.int64),
@@ -219,6 +262,7 @@ def associate(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Associat
         t=np.full((F, 3), np.nan),
         measured=np.zeros(F, dtype=bool),
         chi2=np.full(F, np.nan),
+        ambiguous=np.zeros(F, dtype=bool),
     )
     state = _Tracks(len(data.track_names))
     starts = np.searchsorted(data.obs_frame, np.arange(F + 1))
@@ -247,18 +291,42 @@ def _frame(
             assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
         else:
             fit = None
+    if fit is not None and use.all() and fit.inlier.all():
+        # Every point on its track's marker and the frame consistent: nothing more to decide.
+        out.R[f], out.t[f], out.chi2[f], out.measured[f] = fit.R, fit.t, fit.chi2, True
+        st.last_frame, st.last_R, st.last_t = int(data.frames[f]), fit.R, fit.t
+        out.obs_status[idx] = INLIER
+        out.obs_marker[idx] = known
+        st.misses[tr] = 0
+        return
     fresh = False
-    if fit is not None and fit.inlier.sum() < use.sum():
-        # A track left out may have swapped identity: the frame's signature may explain more.
+    if fit is not None and (fit.inlier.sum() < use.sum() or (fit.inlier.sum() == 3 and len(idx) > 3)):
+        # A track left out may have swapped identity, and 3 markers cannot show an outlier among
+        # them: the frame's signature over all its points may explain more, or the same better.
         out.searches += 1
-        better = _choose(search(y, L, gates), np.full(len(idx), -1))
-        if better is not None and np.sum(better[0] >= 0) > fit.inlier.sum():
-            assign, fit = better
+        n_fit = int(fit.inlier.sum())
+        track_assign = np.full(len(idx), -1, dtype=np.int64)
+        track_assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
+        hyps = [h for h in search(y, L, gates) if not np.array_equal(h[0], track_assign)]
+        top = max([n_fit, *(int(np.sum(h[0] >= 0)) for h in hyps)])
+        rivals = sorted(
+            [(fit.chi2, track_assign, fit)] * (n_fit == top)
+            + [(h[1].chi2, h[0], h[1]) for h in hyps if np.sum(h[0] >= 0) == top],
+            key=lambda c: c[0],
+        )
+        best_is_tracks = rivals[0][1] is track_assign
+        if len(rivals) > 1 and not best_is_tracks and rivals[1][0] - rivals[0][0] <= LIKELIHOOD_RATIO_CHI2:
+            # Several subsets explain the frame about as well: which point is the outlier (or
+            # which marker is which) cannot be told, so the frame is left out.
+            _misses(st, tr, np.full(len(idx), -1))
+            out.obs_status[idx] = REJECTED
+            out.ambiguous[f] = True
+            return
+        if rivals[0][1] is not track_assign:
+            assign, fit = rivals[0][1].copy(), rivals[0][2]
             fresh = True
-    # 2. Without 3 consistent tracks: the points near the markers as a recent pose placed them,
-    #    else identify the frame from scratch by its distance signature (near that recent pose).
     if fit is None:
-        gap = int(data.frames[f]) - st.last_frame
+        gap = abs(int(data.frames[f]) - st.last_frame)
         hyps = _predicted(y, L, gates, st, gap) if gap <= PREDICT_FRAMES else []
         if not hyps:
             out.searches += 1
