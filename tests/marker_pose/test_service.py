@@ -12,6 +12,8 @@ import httpx
 import numpy as np
 import pytest
 
+from tumblescan.marker_pose.evaluate import evaluate
+from tumblescan.marker_pose.result import MarkerPoseResult
 from tumblescan.marker_pose.simulate import SimConfig, simulate
 
 from ..live import serve, wait_job
@@ -43,7 +45,8 @@ def test_json_job_succeeds_near_the_truth(http: httpx.Client, sim_doc: tuple[dic
     done = wait_job(http, job["id"])
     assert done["status"] == "succeeded", done
     result = http.get(f"/v1/jobs/{job['id']}").json()["result"]
-    assert result["kind"] == KIND and result["coverage"] >= 0.98
+    assert result["kind"] == KIND
+    assert evaluate(MarkerPoseResult.model_validate(result), truth)["coverage"] >= 0.98
     frames = {f["frame"]: f for f in truth["frames"]}
     errors = [
         np.linalg.norm(np.array(p["T_world_body"]["t_m"]) - np.array(frames[p["frame"]]["t_m"]))

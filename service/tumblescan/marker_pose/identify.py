@@ -171,8 +171,12 @@ def _area(p: FloatArray) -> float:
 
 
 def _nearest(y_m: FloatArray, q_m: FloatArray, gate_m: float, lsa: object) -> IntArray:
+    """Points to predicted markers, one to one, within the gate; a marker with two points within
+    the gate (a glint next to a sphere) takes neither."""
     d = np.linalg.norm(y_m[:, None] - q_m[None], axis=-1)
-    cost = np.where(d < gate_m, d, 1e6)
+    near = d < gate_m
+    crowded = near.sum(axis=0) > 1
+    cost = np.where(near & ~crowded[None], d, 1e6)
     rows, cols = lsa(cost)  # type: ignore[operator]
     assign = np.full(len(y_m), -1, dtype=np.int64)
     good = cost[rows, cols] < 1e6

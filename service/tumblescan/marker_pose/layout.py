@@ -17,18 +17,38 @@ from .markers_io import MarkerInput
 
 SEED_WINDOW = 15  # frames over which seed tracks must keep their distances
 MIN_FRAMES = 10  # a new marker is seen in this many measured frames first
+MAX_ROUNDS = 6  # identify, refine and grow the layout at most this many times
 
 
 def bootstrap_layout(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple[int, int, int]]:
     """The layout (M, 3) in the launch frame of its first three markers, and those three (gauge)."""
     layout, gauge = _seed(data, gates)
-    for _ in range(4):
+    for _ in range(MAX_ROUNDS):
         assoc = associate(data, layout, gates)
-        grown = _grow(data, assoc.R, assoc.t, assoc.measured, assoc.obs_status, layout, gates)
-        if len(grown) == len(layout):
-            break
+        # Every marker from all frames it was identified in (the seed came from one frame), then
+        # the tracks that are new markers.
+        refined = _refine(data, assoc.R, assoc.t, assoc.obs_marker, layout)
+        grown = _grow(data, assoc.R, assoc.t, assoc.measured, assoc.obs_status, refined, gates)
+        moved = float(np.max(np.linalg.norm(refined - layout, axis=1)))
         layout = grown
+        if len(grown) == len(refined) and moved < 0.1 * gates.sigma_m:
+            break
     return layout, gauge
+
+
+def _refine(data: MarkerInput, R: FloatArray, t: FloatArray, obs_marker: np.ndarray, layout: FloatArray) -> FloatArray:
+    """Each marker's body coordinates averaged over its inlier observations, in the launch frame of
+    markers 1-3 again."""
+    use = obs_marker >= 0
+    k = data.obs_frame[use]
+    body = np.einsum("nji,nj->ni", R[k], data.xyz_m[use] - t[k])
+    M = len(layout)
+    counts = np.bincount(obs_marker[use], minlength=M)
+    sums = np.zeros((M, 3))
+    np.add.at(sums, obs_marker[use], body)
+    out = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1)[:, None], layout)
+    R_l, o_l = launch_frame(out[0], out[1], out[2])
+    return np.asarray((out - o_l) @ R_l)
 
 
 def _seed(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple[int, int, int]]:
