@@ -21,6 +21,7 @@ from .geometry import kabsch
 from .markers_io import MarkerInput
 
 FRAME_ALPHA = 1e-3  # false-alarm rate of the frame's chi-square test
+THREE_MARKER_ALPHA = 1e-2  # the same for a frame of 3 markers
 CONFIRM_FRAMES = 1  # a new track is used once it sat on the same marker this many frames in a row
 MISS_FRAMES = 3  # a track that missed its marker this many frames in a row loses its identity
 PREDICT_FRAMES = 5  # a pose this recent predicts where the markers are
@@ -51,6 +52,8 @@ class Gates:
         alpha = min(FRAME_ALPHA, 2.0 * float(norm.sf(outlier_sigma)) * 1e3)
         dof = np.arange(max_dof + 1)
         thr = np.where(dof > 0, chi2.isf(alpha, np.maximum(dof, 1)), 0.0)
+        # Three markers cannot point at their outlier: their frame is held to a stricter test.
+        thr[3] = chi2.isf(THREE_MARKER_ALPHA, 3)
         return cls(sigma_m, outlier_sigma, np.asarray(thr))
 
     @property
@@ -291,10 +294,11 @@ def _frame(
     use = known >= 0
     if use.sum() >= 3:
         fit = fit_robust(L[known[use]], y[use], gates)
-        if fit is not None and fit.ok and fit.inlier.sum() >= 3:
-            assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
+        gap = abs(int(data.frames[f]) - st.last_frame)
+        if fit is None or not fit.ok or fit.inlier.sum() < 3 or (gap <= RECENT_FRAMES and not _near_pose(fit, st, gap)):
+            fit = None  # a jump from the last pose: identities swapped (a near-symmetric layout)
         else:
-            fit = None
+            assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
     if fit is not None and use.all() and fit.inlier.all():
         # Every point on its track's marker and the frame consistent: nothing more to decide.
         out.R[f], out.t[f], out.chi2[f], out.measured[f] = fit.R, fit.t, fit.chi2, True
@@ -311,7 +315,12 @@ def _frame(
         n_fit = int(fit.inlier.sum())
         track_assign = np.full(len(idx), -1, dtype=np.int64)
         track_assign[np.flatnonzero(use)[fit.inlier]] = known[use][fit.inlier]
-        hyps = [h for h in search(y, L, gates) if not np.array_equal(h[0], track_assign)]
+        gap = abs(int(data.frames[f]) - st.last_frame)
+        hyps = [
+            h
+            for h in search(y, L, gates)
+            if not np.array_equal(h[0], track_assign) and (gap > RECENT_FRAMES or _near_pose(h[1], st, gap))
+        ]
         top = max([n_fit, *(int(np.sum(h[0] >= 0)) for h in hyps)])
         rivals = sorted(
             [(fit.chi2, track_assign, fit)] * (n_fit == top)
