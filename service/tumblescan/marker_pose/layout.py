@@ -17,6 +17,7 @@ from .markers_io import MarkerInput
 
 SEED_WINDOW = 15  # frames over which seed tracks must keep their distances
 MIN_FRAMES = 10  # a new marker is seen in this many measured frames first
+SPREAD_SIGMA = 3.0  # a new marker's body coordinates scatter at most this much (pose error included)
 MAX_ROUNDS = 6  # identify, refine and grow the layout at most this many times
 
 
@@ -112,7 +113,7 @@ def _grow(
         # Rigid in the body: the scatter is the noise (pose error included); moved in the world.
         spread = float(np.sqrt(np.mean(np.sum((b - mean) ** 2, axis=1)) / 3.0))
         moved = float(np.max(np.linalg.norm(w - w.mean(axis=0), axis=1)))
-        if spread > 1.5 * gates.sigma_m or moved < 10 * gates.sigma_m:
+        if spread > SPREAD_SIGMA * gates.sigma_m or moved < 10 * gates.sigma_m:
             continue
         if min(np.linalg.norm(np.array(new) - mean, axis=1)) < 2 * gates.gate_m:
             continue
