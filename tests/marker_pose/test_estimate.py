@@ -16,9 +16,11 @@ from tumblescan.marker_pose.options import MarkerPoseOptions
 from tumblescan.marker_pose.simulate import SimConfig, simulate
 
 
-@pytest.mark.parametrize(("target", "motion", "seed"), [("kite", "paper", 0), ("box", "paper", 1), ("kite", "tumble", 1)])
+@pytest.mark.parametrize(
+    ("target", "motion", "seed"), [("kite", "paper", 0), ("box", "paper", 1), ("kite", "tumble", 1)]
+)
 def test_given_layout_is_efficient_and_covered(target: str, motion: str, seed: int) -> None:
-    sim = simulate(SimConfig(target=target, motion=motion, frames=300), seed)  # type: ignore[arg-type]
+    sim = simulate(SimConfig(target=target, motion=motion, frames=300), seed)
     result = estimate_poses(markers_from_json(sim.document()))
     ev = evaluate(result, sim.truth())
     assert ev["ratio"] <= 1.3

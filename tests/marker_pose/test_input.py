@@ -18,7 +18,7 @@ from tumblescan.marker_pose.simulate import SimConfig, simulate
 BASE = simulate(SimConfig(frames=40), 0).document()
 
 
-def _set(path: list[Any], value: Any) -> Callable[[dict[str, Any]], None]:
+def _set(path: list[Any], value: Any) -> Callable[[dict[str, Any]], object]:
     def f(doc: dict[str, Any]) -> None:
         target = doc
         for p in path[:-1]:
@@ -28,15 +28,35 @@ def _set(path: list[Any], value: Any) -> Callable[[dict[str, Any]], None]:
     return f
 
 
-CASES: list[tuple[str, Callable[[dict[str, Any]], None], str, str]] = [
+CASES: list[tuple[str, Callable[[dict[str, Any]], object], str, str]] = [
     ("length unit", _set(["units", "length"], "mm"), "unsupported_units", "units.length"),
     ("time unit", _set(["units", "time"], "ms"), "unsupported_units", "units.time"),
     ("NaN", _set(["observations", 3, "xyz"], [float("nan"), 0.0, 1.0]), "non_finite_value", "observations[3].xyz"),
-    ("duplicate", lambda d: d["observations"].insert(1, copy.deepcopy(d["observations"][0])), "duplicate_observation", "observations[1]"),
+    (
+        "duplicate",
+        lambda d: d["observations"].insert(1, copy.deepcopy(d["observations"][0])),
+        "duplicate_observation",
+        "observations[1]",
+    ),
     ("time order", _set(["observations", 10, "t"], -1.0), "time_out_of_order", "observations[10].t"),
-    ("two markers", lambda d: d["body"].__setitem__("markers", d["body"]["markers"][:2]), "degenerate_layout", "body.markers"),
-    ("collinear", lambda d: [m.__setitem__("xyz", [0.1 * i, 0.0, 0.0]) for i, m in enumerate(d["body"]["markers"])], "degenerate_layout", "body.markers"),
-    ("mm layout", lambda d: [m.__setitem__("xyz", [v * 1000 for v in m["xyz"]]) for m in d["body"]["markers"]], "layout_scale", "body.markers"),
+    (
+        "two markers",
+        lambda d: d["body"].__setitem__("markers", d["body"]["markers"][:2]),
+        "degenerate_layout",
+        "body.markers",
+    ),
+    (
+        "collinear",
+        lambda d: [m.__setitem__("xyz", [0.1 * i, 0.0, 0.0]) for i, m in enumerate(d["body"]["markers"])],
+        "degenerate_layout",
+        "body.markers",
+    ),
+    (
+        "mm layout",
+        lambda d: [m.__setitem__("xyz", [v * 1000 for v in m["xyz"]]) for m in d["body"]["markers"]],
+        "layout_scale",
+        "body.markers",
+    ),
     ("duplicate id", _set(["body", "markers", 1, "id"], "M1"), "duplicate_marker_id", "body.markers[1].id"),
     ("sigma zero", _set(["sensor", "point_sigma_m"], 0.0), "noise_out_of_range", "sensor.point_sigma_m"),
     ("sigma large", _set(["sensor", "point_sigma_m"], 2.9), "noise_out_of_range", "sensor.point_sigma_m"),
@@ -48,7 +68,7 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], None], str, str]] = [
 
 
 @pytest.mark.parametrize(("name", "change", "code", "field"), CASES, ids=[c[0] for c in CASES])
-def test_refusal_names_the_field(name: str, change: Callable[[dict[str, Any]], None], code: str, field: str) -> None:
+def test_refusal_names_the_field(name: str, change: Callable[[dict[str, Any]], object], code: str, field: str) -> None:
     doc = copy.deepcopy(BASE)
     change(doc)
     with pytest.raises(InputError) as err:

@@ -58,7 +58,9 @@ def test_json_job_succeeds_near_the_truth(http: httpx.Client, sim_doc: tuple[dic
     assert report.status_code == 200 and report.text.startswith("<!DOCTYPE html>")
 
 
-def test_upload_with_separate_layout_succeeds(http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]) -> None:
+def test_upload_with_separate_layout_succeeds(
+    http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]
+) -> None:
     doc, _ = sim_doc
     doc = copy.deepcopy(doc)
     layout = doc.pop("body")
@@ -77,7 +79,12 @@ def test_upload_with_separate_layout_succeeds(http: httpx.Client, sim_doc: tuple
     ],
 )
 def test_bad_input_is_422_naming_the_field(
-    http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]], path: list[Any], value: Any, code: str, field: str
+    http: httpx.Client,
+    sim_doc: tuple[dict[str, Any], dict[str, Any]],
+    path: list[Any],
+    value: Any,
+    code: str,
+    field: str,
 ) -> None:
     doc = copy.deepcopy(sim_doc[0])
     target = doc

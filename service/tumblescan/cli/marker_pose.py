@@ -11,7 +11,9 @@ import typer
 from .common import input_errors
 
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, help="marker-pose-graph: target pose from tracked markers (SE(3) pose graph)."
+    add_completion=False,
+    no_args_is_help=True,
+    help="marker-pose-graph: target pose from tracked markers (SE(3) pose graph).",
 )
 
 
@@ -51,7 +53,9 @@ def estimate(
     from ..marker_pose.options import MarkerPoseOptions
     from ..marker_pose.pipeline import run
 
-    options = MarkerPoseOptions(method=method, motion_prior=motion_prior, body_frame=body_frame, point_sigma_m=point_sigma_m)
+    options = MarkerPoseOptions(
+        method=method, motion_prior=motion_prior, body_frame=body_frame, point_sigma_m=point_sigma_m
+    )
     result = run(markers, layout=layout, options=options)
     if report is not None:
         from ..marker_pose.report import build_report

@@ -61,8 +61,12 @@ def evaluate(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, float
         "pos_3sigma_mm": float(1000 * 3 * np.sqrt(np.mean(np.sum(E[:, 3:] ** 2, axis=1)) / 3)),
         "max_rot_deg": float(np.degrees(np.max(np.linalg.norm(E[:, :3], axis=1)))),
         # Drift: the mean error of the last half against the first (0 when nothing accumulates).
-        "drift_deg": float(np.degrees(np.linalg.norm(E[half:, :3].mean(axis=0) - E[:half, :3].mean(axis=0)))) if half else 0.0,
-        "drift_mm": float(1000 * np.linalg.norm(E[half:, 3:].mean(axis=0) - E[:half, 3:].mean(axis=0))) if half else 0.0,
+        "drift_deg": float(np.degrees(np.linalg.norm(E[half:, :3].mean(axis=0) - E[:half, :3].mean(axis=0))))
+        if half
+        else 0.0,
+        "drift_mm": float(1000 * np.linalg.norm(E[half:, 3:].mean(axis=0) - E[:half, 3:].mean(axis=0)))
+        if half
+        else 0.0,
     }
 
 

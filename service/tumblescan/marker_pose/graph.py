@@ -11,6 +11,7 @@ the contract's order (dtheta_world [rad], dp_world [m]).
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,8 +40,8 @@ def _noise(sigmas: FloatArray | float, dim: int, robust: str, k: float) -> Any:
     import gtsam
 
     base = (
-        gtsam.noiseModel.Isotropic.Sigma(dim, float(sigmas))
-        if np.isscalar(sigmas)
+        gtsam.noiseModel.Isotropic.Sigma(dim, sigmas)
+        if isinstance(sigmas, float)
         else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
     )
     if robust == "huber":
@@ -108,13 +109,13 @@ def markers_graph(
         values.insert(X(int(k)), _pose(R0[k], t0[k] + shift).inverse())
     iso = _noise(sigma_m, 3, robust, robust_k)
     for i in np.flatnonzero(use):
-        k, m = int(obs_frame[i]), int(obs_marker[i])
+        fk, m = int(obs_frame[i]), int(obs_marker[i])
         if estimate_layout:
             r = float(np.linalg.norm(y[i]))
             nm = _noise(np.array([sigma_m / r, sigma_m / r, sigma_m]), 3, robust, robust_k)
-            graph.add(gtsam.BearingRangeFactor3D(X(k), L(m), gtsam.Unit3(y[i]), r, nm))
+            graph.add(gtsam.BearingRangeFactor3D(X(fk), L(m), gtsam.Unit3(y[i]), r, nm))
         else:
-            graph.add(gtsam.KnownLandmarkFactorPose3(X(k), layout_m[m], y[i], iso))
+            graph.add(gtsam.KnownLandmarkFactorPose3(X(fk), layout_m[m], y[i], iso))
     if estimate_layout:
         assert gauge is not None
         for m in range(M):
@@ -161,7 +162,9 @@ def _cov_from_body_world(C_xi: FloatArray, p_world_m: FloatArray) -> FloatArray:
     return np.asarray(A @ C_xi @ A.T)
 
 
-def frame_covariances(R: FloatArray, obs_frame: IntArray, obs_marker: IntArray, layout_m: FloatArray, sigma_m: float, measured: BoolArray) -> FloatArray:
+def frame_covariances(
+    R: FloatArray, obs_frame: IntArray, obs_marker: IntArray, layout_m: FloatArray, sigma_m: float, measured: BoolArray
+) -> FloatArray:
     """Per-frame Kabsch covariances ``sigma^2 (sum J^T J)^-1`` (F, 6, 6), order (dtheta_world, dp_world)."""
     F = len(measured)
     info = np.zeros((F, 6, 6))
@@ -205,16 +208,16 @@ def motion_graph(
     meas = np.flatnonzero(measured)
     # Frames in the graph: the measured ones and those in short gaps between them.
     in_graph = measured.copy()
-    for a, b in zip(meas[:-1], meas[1:], strict=True):
-        if 1 < b - a and frame_numbers[b] - frame_numbers[a] - 1 <= max_bridge_frames:
+    for a, b in itertools.pairwise(meas):
+        if b - a > 1 and frame_numbers[b] - frame_numbers[a] - 1 <= max_bridge_frames:
             in_graph[a + 1 : b] = True
     nodes = np.flatnonzero(in_graph)
     graph = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     psd = np.array([q_rot] * 3 + [q_trans] * 3)
     n_motion = 0
-    for j, k in enumerate(nodes):
-        k = int(k)
+    for j, node in enumerate(nodes):
+        k = int(node)
         if measured[k]:
             Rk, tk = R[k], t[k]
         else:  # between two measured frames: interpolate the start
@@ -233,12 +236,14 @@ def motion_graph(
             C_body = Jinv @ cov[k] @ Jinv.T
             C_body = 0.5 * (C_body + C_body.T)
             base = gtsam.noiseModel.Gaussian.Covariance(C_body)
-            nm = base
+            nm: Any = base
             if robust != "none":
-                est = (gtsam.noiseModel.mEstimator.Huber if robust == "huber" else gtsam.noiseModel.mEstimator.Cauchy).Create(robust_k)
+                est = (
+                    gtsam.noiseModel.mEstimator.Huber if robust == "huber" else gtsam.noiseModel.mEstimator.Cauchy
+                ).Create(robust_k)
                 nm = gtsam.noiseModel.Robust.Create(est, base)
             graph.add(gtsam.PriorFactorPose3(X(k), _pose(Rk, tk), nm))
-        if j > 0 and nodes[j - 1] == k - 1 or (j > 0 and in_graph[nodes[j - 1] : k + 1].all()):
+        if (j > 0 and nodes[j - 1] == k - 1) or (j > 0 and in_graph[nodes[j - 1] : k + 1].all()):
             p = int(nodes[j - 1])
             s0 = gtsam.StateData(X(p), V(p), float(t_s[p]))
             s1 = gtsam.StateData(X(k), V(k), float(t_s[k]))
@@ -253,8 +258,9 @@ def motion_graph(
     tout = np.full((F, 3), np.nan)
     cout = np.full((F, 6, 6), np.nan)
     marg = gtsam.Marginals(graph, result) if marginals else None
-    for k in nodes:
-        T = result.atPose3(X(int(k)))
+    for node in nodes:
+        k = int(node)
+        T = result.atPose3(X(k))
         Rk = T.rotation().matrix()
         Rout[k], tout[k] = Rk, T.translation()
         if marg is not None:
@@ -294,7 +300,7 @@ def auto_psd(
     if len(k) < 8:
         return 1.0, 0.1
     dt = float(np.median(np.diff(t_s[k])))
-    w = max(1, min(int(round(window_s / max(dt, 1e-9))), len(k) // 3))
+    w = max(1, min(round(window_s / max(dt, 1e-9)), len(k) // 3))
     a, b, c = k[: -2 * w], k[w:-w], k[2 * w :]
     T1, T2 = t_s[b] - t_s[a], t_s[c] - t_s[b]
     v1 = (t[b] - t[a]) / T1[:, None]

@@ -112,7 +112,9 @@ def fit_robust(p_body_m: FloatArray, y_m: FloatArray, gates: Gates) -> Fit | Non
     return _one_out(p_body_m, y_m, keep, gates, R, t, chi2)
 
 
-def _one_out(p: FloatArray, y: FloatArray, keep: BoolArray, gates: Gates, R: FloatArray, t: FloatArray, chi2: float) -> Fit:
+def _one_out(
+    p: FloatArray, y: FloatArray, keep: BoolArray, gates: Gates, R: FloatArray, t: FloatArray, chi2: float
+) -> Fit:
     passing = []
     idx = np.flatnonzero(keep)
     if len(idx) >= 4:
@@ -425,6 +427,7 @@ def _near_pose(fit: Fit, st: _Tracks, gap: int) -> bool:
 def _choose(hyps: list[tuple[IntArray, Fit]], known: IntArray) -> tuple[IntArray, Fit] | None:
     """One hypothesis, or None when the frame is ambiguous: several hypotheses are kept only if
     exactly one agrees with the tracks' identities; relabelling a track needs 4 or more inliers."""
+
     def agrees(assign: IntArray) -> bool:
         both = (assign >= 0) & (known >= 0)
         return bool(np.all(assign[both] == known[both]))

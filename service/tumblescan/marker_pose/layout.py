@@ -82,7 +82,9 @@ def _seed(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple[int, int, 
                     body = (p - o) @ R
                     order = [i1, i2, i3] + [i for i in range(size) if i not in (i1, i2, i3)]
                     return body[order], (0, 1, 2)
-    raise TooFewFramesError("no frame has 3 markers that stay rigid: the layout cannot be bootstrapped", field="observations")
+    raise TooFewFramesError(
+        "no frame has 3 markers that stay rigid: the layout cannot be bootstrapped", field="observations"
+    )
 
 
 def _positions(data: MarkerInput, later: np.ndarray, track: int) -> dict[int, FloatArray]:
@@ -95,7 +97,13 @@ def _area(p: FloatArray) -> float:
 
 
 def _grow(
-    data: MarkerInput, R: FloatArray, t: FloatArray, measured: np.ndarray, status: np.ndarray, layout: FloatArray, gates: Gates
+    data: MarkerInput,
+    R: FloatArray,
+    t: FloatArray,
+    measured: np.ndarray,
+    status: np.ndarray,
+    layout: FloatArray,
+    gates: Gates,
 ) -> FloatArray:
     """Add the tracks seen in measured frames that are rigid in the body frame and moved in the world."""
     free = (status == UNASSIGNED) & measured[data.obs_frame]

@@ -103,7 +103,9 @@ def read_markers(
     if layout_path is not None:
         layout_doc = _load_json(layout_path, "layout")
         if "body" in doc:
-            raise MalformedInputError("give the layout once: in the document's body or as the layout file", field="layout")
+            raise MalformedInputError(
+                "give the layout once: in the document's body or as the layout file", field="layout"
+            )
         doc["body"] = layout_doc.get("body", layout_doc) if isinstance(layout_doc, dict) else layout_doc
     return markers_from_json(doc, point_sigma_m=point_sigma_m, limits=limits)
 
@@ -250,7 +252,8 @@ def layout_from_json(body: Any, limits: MarkerPoseLimits | None = None) -> Layou
     layout = Layout(ids, p_m)
     if symmetric_layout(p_m, tol_m=0.004):
         layout.warnings.append(
-            "the layout is (nearly) symmetric: markers cannot be told apart by their distances; identities rely on tracks"
+            "the layout is (nearly) symmetric: markers cannot be told apart by their distances; "
+            "identities rely on tracks"
         )
     return layout
 
@@ -293,20 +296,26 @@ def _observations(
             raise UnknownFieldError(f"unknown field observations[{i}].{key}", field=f"observations[{i}].{key}")
         f, ti, tr, p = o.get("frame"), o.get("t"), o.get("track"), o.get("xyz")
         if not isinstance(f, int) or isinstance(f, bool) or f < 0:
-            raise MalformedInputError(f"observations[{i}].frame must be an integer >= 0", field=f"observations[{i}].frame")
+            raise MalformedInputError(
+                f"observations[{i}].frame must be an integer >= 0", field=f"observations[{i}].frame"
+            )
         if not _is_number(ti):
             raise MalformedInputError(f"observations[{i}].t must be a number [s]", field=f"observations[{i}].t")
         if isinstance(tr, int) and not isinstance(tr, bool):
             tr = str(tr)
         if not isinstance(tr, str) or not tr:
-            raise MalformedInputError(f"observations[{i}].track must be a non-empty string", field=f"observations[{i}].track")
+            raise MalformedInputError(
+                f"observations[{i}].track must be a non-empty string", field=f"observations[{i}].track"
+            )
         if not isinstance(p, list) or len(p) != 3 or not all(_is_number(v) for v in p):
             raise MalformedInputError(f"observations[{i}].xyz must be 3 numbers [m]", field=f"observations[{i}].xyz")
         frame[i], t[i], xyz[i] = f, ti, p
         track[i] = tracks.setdefault(tr, len(tracks))
         if o.get("marker") is not None:
             if not isinstance(o["marker"], str):
-                raise MalformedInputError(f"observations[{i}].marker must be a string", field=f"observations[{i}].marker")
+                raise MalformedInputError(
+                    f"observations[{i}].marker must be a string", field=f"observations[{i}].marker"
+                )
             label[i] = labels.setdefault(o["marker"], len(labels))
     _check_values(frame, t, xyz, track, limits, len(tracks))
     order = np.lexsort((track, frame))
@@ -371,7 +380,9 @@ def _check_order(frame: IntArray, t: FloatArray, track: IntArray, order: IntArra
     within = ~step & (dt != 0)
     if np.any(within):
         i = int(order[np.flatnonzero(within)[0] + 1])
-        raise TimeOrderError(f"observations[{i}].t differs from its frame's other observations", field=f"observations[{i}].t")
+        raise TimeOrderError(
+            f"observations[{i}].t differs from its frame's other observations", field=f"observations[{i}].t"
+        )
     across = step & (dt <= 0)
     if np.any(across):
         i = int(order[np.flatnonzero(across)[0] + 1])

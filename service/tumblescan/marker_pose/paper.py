@@ -38,7 +38,9 @@ def vc_pose(P_m: FloatArray, P_w: FloatArray) -> tuple[FloatArray, FloatArray]:
     return R, X_w - R @ X_m
 
 
-def paper_graph(data: MarkerInput, assoc: Association, layout_m: FloatArray, sigma: float, *, marginals: bool) -> GraphResult:
+def paper_graph(
+    data: MarkerInput, assoc: Association, layout_m: FloatArray, sigma: float, *, marginals: bool
+) -> GraphResult:
     import gtsam
     from gtsam.symbol_shorthand import X
 
@@ -105,7 +107,15 @@ def paper_graph(data: MarkerInput, assoc: Association, layout_m: FloatArray, sig
             J[3:, 3:] = R[f]
             cov[f] = J @ C @ J.T
     status = [STATUS_MEASURED if not np.isnan(R[f, 0, 0]) else STATUS_MISSING for f in range(F)]
-    return GraphResult(R, t, cov, status, layout_m, np.zeros(M), _info(len(in_graph), M, graph.size(), 2 * graph.error(result), opt.iterations()))
+    return GraphResult(
+        R,
+        t,
+        cov,
+        status,
+        layout_m,
+        np.zeros(M),
+        _info(len(in_graph), M, graph.size(), 2 * graph.error(result), opt.iterations()),
+    )
 
 
 def _info(nodes: int, M: int, factors: int, chi2: float, iterations: int = 0) -> dict[str, object]:

@@ -15,7 +15,10 @@ from .simulate import SimConfig, simulate
 
 
 def load_input(
-    markers: Path, layout: Path | None = None, options: MarkerPoseOptions | None = None, limits: MarkerPoseLimits | None = None
+    markers: Path,
+    layout: Path | None = None,
+    options: MarkerPoseOptions | None = None,
+    limits: MarkerPoseLimits | None = None,
 ) -> MarkerInput:
     """Read and validate (every refusal is an ``InputError`` naming the field)."""
     options = options or MarkerPoseOptions()

@@ -59,7 +59,7 @@ def build_result(
             FramePose(
                 frame=int(data.frames[f]),
                 t=float(data.t_s[f]),
-                status=graph.status[f],  # type: ignore[arg-type]
+                status=graph.status[f],
                 n_markers=int(n_markers[f]),
                 T_world_body=PoseValue(q_wxyz=q[f].tolist(), t_m=graph.t[f].tolist()) if have else None,
                 cov=graph.cov[f].tolist() if have and not np.isnan(graph.cov[f, 0, 0]) else None,
@@ -89,7 +89,7 @@ def build_result(
     frame_markers = ids[:3]
     return MarkerPoseResult(
         method=options.method,
-        body_frame=body_frame,  # type: ignore[arg-type]
+        body_frame=body_frame,
         point_sigma_m=sigma,
         motion_prior=options.motion_prior,
         poses=poses,

@@ -106,6 +106,7 @@ class Simulation:
         frames = []
         inl = self.inliers()
         for k in range(len(self.t_s)):
+            c, cs = crlb[k], crlb_self[k]
             frames.append(
                 {
                     "frame": k,
@@ -113,8 +114,8 @@ class Simulation:
                     "q_wxyz": quat_wxyz(self.R_world_body[k]).tolist(),
                     "t_m": self.t_world_m[k].tolist(),
                     "inlier_markers": [self.target.ids[m] for m in sorted(inl[k])],
-                    "crlb": None if crlb[k] is None else crlb[k].tolist(),
-                    "crlb_self_calibrated": None if crlb_self[k] is None else crlb_self[k].tolist(),
+                    "crlb": None if c is None else c.tolist(),
+                    "crlb_self_calibrated": None if cs is None else cs.tolist(),
                 }
             )
         tracks = {tr: (self.target.ids[m] if m >= 0 else None) for tr, m in zip(self.track, self.marker, strict=True)}
@@ -159,7 +160,9 @@ class Simulation:
                         if seen_with[m] >= 10:
                             qualified.add(m)
                 use = ms & qualified
-            out.append(_bound(self.R_world_body[k], self.target.p_body_m[sorted(use)], sigma) if len(use) >= 3 else None)
+            out.append(
+                _bound(self.R_world_body[k], self.target.p_body_m[sorted(use)], sigma) if len(use) >= 3 else None
+            )
         return out
 
 
@@ -203,7 +206,12 @@ Slot = Any  # a callable: rng -> (position (3,), normal (3,))
 
 def _kite_slots() -> list[Slot]:
     # Nose, wing tip, tail, wing tip of a 400 mm flat vehicle; markers on top (normals +z).
-    base = [np.array([0.20, 0.0, 0.0]), np.array([0.0, 0.15, 0.0]), np.array([-0.18, 0.0, 0.0]), np.array([0.0, -0.12, 0.0])]
+    base = [
+        np.array([0.20, 0.0, 0.0]),
+        np.array([0.0, 0.15, 0.0]),
+        np.array([-0.18, 0.0, 0.0]),
+        np.array([0.0, -0.12, 0.0]),
+    ]
     up = np.array([0.0, 0.0, 1.0])
     return [lambda r, b=b: (b + np.array([*r.uniform(-0.03, 0.03, 2), 0.0]), up) for b in base]
 

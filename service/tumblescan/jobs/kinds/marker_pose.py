@@ -36,7 +36,7 @@ def _result() -> type[BaseModel]:
 class MarkerPoseGraph:
     name = "marker-pose-graph"
     title = "Target pose from tracked markers, refined by an SE(3) pose graph"
-    forms = (
+    forms: tuple[InputForm, ...] = (
         InputForm(
             name="markers",
             description="level A: 3D marker coordinates per frame and track (tumblescan.markers.v1 JSON or CSV)",
