@@ -36,6 +36,11 @@ class GraphResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
+def no_poses(F: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(R (F, 3, 3), t (F, 3), cov (F, 6, 6)) all NaN: no frame has a pose yet."""
+    return np.full((F, 3, 3), np.nan), np.full((F, 3), np.nan), np.full((F, 6, 6), np.nan)
+
+
 def _noise(sigmas: FloatArray | float, dim: int, robust: str, k: float) -> Any:
     import gtsam
 
@@ -124,9 +129,7 @@ def markers_graph(
         for m, sig in zip(gauge, ([tiny] * 3, [big, big, tiny], [big, tiny, tiny]), strict=True):
             graph.add(gtsam.PriorFactorPoint3(L(m), layout_m[m], gtsam.noiseModel.Diagonal.Sigmas(np.array(sig))))
     result, iterations, chi2 = _solve(graph, values)
-    R = np.full((F, 3, 3), np.nan)
-    t = np.full((F, 3), np.nan)
-    cov = np.full((F, 6, 6), np.nan)
+    R, t, cov = no_poses(F)
     marg = gtsam.Marginals(graph, result) if marginals else None
     for k in frames:
         T_wb = result.atPose3(X(int(k))).inverse()
@@ -254,9 +257,7 @@ def motion_graph(
     if len(nodes):
         graph.add(gtsam.PriorFactorVector(V(int(nodes[0])), np.zeros(6), gtsam.noiseModel.Isotropic.Sigma(6, 1e3)))
     result, iterations, chi2 = _solve(graph, values)
-    Rout = np.full((F, 3, 3), np.nan)
-    tout = np.full((F, 3), np.nan)
-    cout = np.full((F, 6, 6), np.nan)
+    Rout, tout, cout = no_poses(F)
     marg = gtsam.Marginals(graph, result) if marginals else None
     for node in nodes:
         k = int(node)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray
-from .graph import STATUS_MEASURED, STATUS_MISSING, GraphResult
+from .graph import STATUS_MEASURED, STATUS_MISSING, GraphResult, no_poses
 from .identify import Association
 from .markers_io import MarkerInput
 
@@ -51,9 +51,7 @@ def paper_graph(
         pts[data.obs_frame[i]][int(assoc.obs_marker[i])] = data.xyz_m[i]
     # 2. The layout as measured at the zero instant (the first frame with 4 markers), frame 0 pose.
     first = next((f for f in range(F) if len(pts[f]) >= 4), None)
-    R = np.full((F, 3, 3), np.nan)
-    t = np.full((F, 3), np.nan)
-    cov = np.full((F, 6, 6), np.nan)
+    R, t, cov = no_poses(F)
     if first is None:
         return GraphResult(R, t, cov, [STATUS_MISSING] * F, layout_m, np.zeros(M), _info(0, 0, 0, 0.0))
     # 3. Chain: within a frame pair sharing 4 markers, the relative VC pose; each segment start is
