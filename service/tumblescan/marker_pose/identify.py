@@ -26,6 +26,7 @@ CONFIRM_FRAMES = 1  # a new track is used once it sat on the same marker this ma
 MISS_FRAMES = 3  # a track that missed its marker this many frames in a row loses its identity
 PREDICT_FRAMES = 5  # a pose this recent predicts where the markers are
 RECENT_FRAMES = 25  # a search result must be within reach of a pose this recent
+BACKWARD_CONTEXT = 50  # frames after a left-out frame the backward pass runs through
 STEP_M = 0.02  # how far a marker may move per frame [m] (1 m/s at 50 Hz)
 LIKELIHOOD_RATIO_CHI2 = 2.0 * np.log(100.0)
 MAX_TRIPLETS = 80
@@ -229,37 +230,49 @@ def associate(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Associat
     forward pass, then a backward one for the frames the forward pass left out (before the first
     identification, or ambiguous until a later frame told the tracks apart)."""
     fwd = _associate_pass(data, layout_m, gates)
-    if fwd.measured.all():
+    # The backward pass sees each frame the forward pass left out, with the frames after it.
+    todo = np.flatnonzero(~fwd.measured & ~fwd.ambiguous)
+    if not len(todo):
         return fwd
-    rev = _reversed(data)
-    bwd = _associate_pass(rev, layout_m, gates)
-    F, N = data.n_frames, len(data.xyz_m)
-    take = ~fwd.measured & ~fwd.ambiguous & bwd.measured[::-1] & ~bwd.ambiguous[::-1]
-    fwd.R[take], fwd.t[take], fwd.chi2[take] = bwd.R[::-1][take], bwd.t[::-1][take], bwd.chi2[::-1][take]
-    fwd.measured |= take
-    obs = take[data.obs_frame]
-    fwd.obs_marker[obs] = bwd.obs_marker[::-1][obs]
-    fwd.obs_status[obs] = bwd.obs_status[::-1][obs]
+    window = np.zeros(data.n_frames + BACKWARD_CONTEXT + 1, dtype=np.int64)
+    np.add.at(window, todo, 1)
+    np.add.at(window, todo + BACKWARD_CONTEXT + 1, -1)
+    frames = np.flatnonzero(np.cumsum(window)[: data.n_frames] > 0)
+    sub, sub_obs = _subset_reversed(data, frames)
+    bwd = _associate_pass(sub, layout_m, gates)
+    back = frames[::-1]  # sub's frame i is data's frame back[i]
+    take = bwd.measured & ~bwd.ambiguous & ~fwd.measured[back] & ~fwd.ambiguous[back]
+    dst = back[take]
+    fwd.R[dst], fwd.t[dst], fwd.chi2[dst] = bwd.R[take], bwd.t[take], bwd.chi2[take]
+    fwd.measured[dst] = True
+    obs_sub = take[sub.obs_frame]
+    src_obs = np.flatnonzero(obs_sub)
+    fwd.obs_marker[sub_obs[src_obs]] = bwd.obs_marker[src_obs]
+    fwd.obs_status[sub_obs[src_obs]] = bwd.obs_status[src_obs]
     fwd.searches += bwd.searches
-    fwd.ambiguous |= bwd.ambiguous[::-1] & ~fwd.measured
-    assert len(fwd.obs_marker) == N and len(fwd.R) == F
     return fwd
 
 
-def _reversed(data: MarkerInput) -> MarkerInput:
-    """The same input with time running backwards (observation order reversed)."""
+def _subset_reversed(data: MarkerInput, frames: IntArray) -> tuple[MarkerInput, IntArray]:
+    """The observations of ``frames`` (indices, increasing) with time running backwards, and each
+    observation's index in ``data``."""
     from dataclasses import replace
 
-    F = data.n_frames
-    return replace(
+    keep = np.zeros(data.n_frames, dtype=bool)
+    keep[frames] = True
+    obs = np.flatnonzero(keep[data.obs_frame])[::-1]
+    new_index = np.full(data.n_frames, -1, dtype=np.int64)
+    new_index[frames[::-1]] = np.arange(len(frames))
+    sub = replace(
         data,
-        frames=data.frames[::-1].copy(),
-        t_s=data.t_s[::-1].copy(),
-        obs_frame=(F - 1 - data.obs_frame)[::-1].copy(),
-        obs_track=data.obs_track[::-1].copy(),
-        xyz_m=data.xyz_m[::-1].copy(),
-        obs_label=data.obs_label[::-1].copy(),
+        frames=data.frames[frames[::-1]],
+        t_s=data.t_s[frames[::-1]],
+        obs_frame=new_index[data.obs_frame[obs]],
+        obs_track=data.obs_track[obs],
+        xyz_m=data.xyz_m[obs],
+        obs_label=np.full(len(obs), -1, dtype=np.int64),
     )
+    return sub, obs
 
 
 def _associate_pass(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Association:
@@ -418,9 +431,8 @@ def _predicted(y: FloatArray, L: FloatArray, gates: Gates, st: _Tracks, gap: int
 
 def _near_pose(fit: Fit, st: _Tracks, gap: int) -> bool:
     """Whether a pose is within reach of the last measured one ``gap`` frames earlier."""
-    from .geometry import log_so3
-
-    angle = float(np.linalg.norm(log_so3(fit.R @ st.last_R.T)))
+    cos_angle = (float(np.trace(fit.R @ st.last_R.T)) - 1.0) / 2.0
+    angle = float(np.arccos(min(1.0, max(-1.0, cos_angle))))
     return angle <= np.radians(10.0 + 3.0 * gap) and float(np.linalg.norm(fit.t - st.last_t)) <= 0.05 + STEP_M * gap
 
 
