@@ -85,3 +85,21 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["estimate", str(tmp_path / "m.json"), "--json"])
     assert r.exit_code == 2
     assert "units.length" in r.output
+
+
+def test_client_model_reads_the_result() -> None:
+    from tumblescan_client.results import result_model
+
+    sim = simulate(SimConfig(frames=60), 8)
+    result = estimate_poses(markers_from_json(sim.document()), MarkerPoseOptions(motion_prior="constant_velocity"))
+    typed = result_model("marker-pose-graph").model_validate_json(result.model_dump_json())
+    assert typed.model_dump(mode="json") == result.model_dump(mode="json")
+
+
+def test_report_has_trajectory_attitude_and_residuals() -> None:
+    from tumblescan.marker_pose.report import build_report
+
+    sim = simulate(SimConfig(frames=60), 9)
+    html = build_report(estimate_poses(markers_from_json(sim.document())), "t")
+    for div in ("trajectory", "attitude", "position", "Residuals per marker"):
+        assert div in html
