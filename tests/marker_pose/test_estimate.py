@@ -103,3 +103,23 @@ def test_report_has_trajectory_attitude_and_residuals() -> None:
     html = build_report(estimate_poses(markers_from_json(sim.document())), "t")
     for div in ("trajectory", "attitude", "position", "Residuals per marker"):
         assert div in html
+
+
+@pytest.mark.parametrize(
+    "opts", [{"robust": "huber"}, {"body_frame": "launch"}, {"robust": "cauchy", "marginals": True}]
+)
+def test_options_keep_the_estimate_efficient(opts: dict[str, str]) -> None:
+    sim = simulate(SimConfig(target="kite", frames=200), 10)
+    result = estimate_poses(markers_from_json(sim.document()), MarkerPoseOptions.model_validate(opts))
+    ev = evaluate(result, sim.truth())
+    assert ev["ratio"] <= 1.3 and ev["coverage"] >= 0.98
+    assert result.body_frame == opts.get("body_frame", "layout")
+
+
+def test_layout_body_frame_without_a_layout_is_refused() -> None:
+    from tumblescan.errors import InputError
+
+    sim = simulate(SimConfig(frames=60, with_layout=False), 0)
+    with pytest.raises(InputError) as err:
+        estimate_poses(markers_from_json(sim.document()), MarkerPoseOptions(body_frame="layout"))
+    assert err.value.code == "invalid_option" and err.value.field == "body_frame"
