@@ -160,6 +160,43 @@ def plot(runs: list[dict[str, Any]], name: str) -> None:
     fig.savefig(out_dir() / f"marker_pose_{name}.png", dpi=100)
 
 
+def error_plot() -> None:
+    """Rotation error over time of one paper-like kite run, for each method, beside the per-frame
+    3-sigma bound: what drift would look like (there is none in ours)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tumblescan.marker_pose.geometry import log_so3, matrix_from_quat_wxyz
+
+    sim = simulate(SimConfig(target="kite", motion="paper"), 0)
+    data = markers_from_json(sim.document())
+    truth = {f["frame"]: f for f in sim.truth()["frames"]}
+    fig, ax = plt.subplots(figsize=(12, 4))
+    for name, opts in METHODS.items():
+        result = estimate_poses(data, MarkerPoseOptions(**opts))
+        t, err = [], []
+        for p in result.poses:
+            if p.status == "measured" and p.T_world_body is not None:
+                R_t = matrix_from_quat_wxyz(np.array(truth[p.frame]["q_wxyz"]))
+                R_e = matrix_from_quat_wxyz(np.array(p.T_world_body.q_wxyz))
+                t.append(p.t)
+                err.append(np.degrees(np.linalg.norm(log_so3(R_t @ R_e.T))))
+        ax.plot(t, err, lw=0.8, label=name)
+    bound = [
+        (f["t"], np.degrees(3 * np.sqrt(np.trace(np.array(f["crlb"])[:3, :3]))))
+        for f in truth.values()
+        if f["crlb"] is not None
+    ]
+    ax.plot(*zip(*bound, strict=True), "k--", lw=0.8, label="per-frame bound, 3 sigma (norm)")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("rotation error [deg]")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out_dir() / "marker_pose_error_over_time.png", dpi=100)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", type=int, default=5)
@@ -172,6 +209,7 @@ def main() -> None:
         runs = accuracy(args.seeds, with_layout)
         print(f"\n{name} (500 frames, 50 Hz, sigma 2.9 mm, 3 resets = 4 segments)\n" + table(summary(runs), HEADER))
         plot(runs, name.replace(" ", "_"))
+    error_plot()
     if not args.no_timing:
         print(
             "\ntimings [s] (kite, 4 markers)\n"
