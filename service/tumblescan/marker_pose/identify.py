@@ -388,9 +388,12 @@ def _frame(
                 assign[i] = m
         if assign[i] >= 0:
             taken[m] = True
-    # 4. The frame's final fit and chi-square test over every assigned point.
+    # 4. The frame's final fit and chi-square test over every assigned point; points just outside
+    #    the gate of a free marker get a second look from the refined pose.
     used = assign >= 0
     final = fit_robust(L[assign[used]], y[used], gates) if used.sum() >= 3 else None
+    if final is not None and final.ok:
+        final, assign, used = _second_look(y, L, gates, assign, conflict, final)
     status = np.where(conflict, CONFLICT, UNASSIGNED)
     if final is not None:
         ui = np.flatnonzero(used)
@@ -412,6 +415,32 @@ def _frame(
             out.identity_changes += 1
         st.marker[t_i], st.misses[t_i], st.streak[t_i], st.pending[t_i] = assign[i], 0, 0, -1
     _misses(st, tr, assign)
+
+
+def _second_look(
+    y: FloatArray, L: FloatArray, gates: Gates, assign: IntArray, conflict: BoolArray, fit: Fit
+) -> tuple[Fit, IntArray, BoolArray]:
+    """Add unassigned points within twice the gate of a free marker as the fit places it, if the
+    fit with them passes (a noisy pose can put a marker just beyond the gate)."""
+    used = assign >= 0
+    inl = np.flatnonzero(used)[fit.inlier]
+    taken = np.zeros(len(L), dtype=bool)
+    taken[assign[inl]] = True
+    d = np.linalg.norm(y[:, None] - (L @ fit.R.T + fit.t)[None], axis=-1)
+    trial = assign.copy()
+    trial[np.flatnonzero(used)[~fit.inlier]] = -1
+    added = False
+    for i in np.flatnonzero((assign < 0) & ~conflict):
+        m = int(np.argmin(np.where(taken, np.inf, d[i])))
+        if not taken[m] and d[i, m] < 2.0 * gates.gate_m:
+            trial[i], taken[m], added = m, True, True
+    if not added:
+        return fit, assign, used
+    t_used = trial >= 0
+    better = fit_robust(L[trial[t_used]], y[t_used], gates)
+    if better is None or not better.ok or better.inlier.sum() <= fit.inlier.sum():
+        return fit, assign, used
+    return better, trial, t_used
 
 
 def _predicted(y: FloatArray, L: FloatArray, gates: Gates, st: _Tracks, gap: int) -> list[tuple[IntArray, Fit]]:
