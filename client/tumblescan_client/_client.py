@@ -6,119 +6,32 @@ import asyncio
 import json
 import os
 import time
-from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import httpx
-from pydantic import BaseModel
 
+from ._requests import (
+    DEFAULT_KIND,
+    DEFAULT_TIMEOUT,
+    Files,
+    PathLike,
+    Progress,
+    close_parts,
+    configure,
+    create_body,
+    long_poll_hold,
+    next_poll,
+    open_parts,
+    retry_delay,
+    transport_error,
+    typed_result,
+    upload_request,
+)
 from ._retry import RetryPolicy
-from .errors import APIConnectionError, APITimeoutError, JobFailedError, WaitTimeoutError, error_for
+from .errors import WaitTimeoutError
 from .models import Artifact, Job, JobPage, Kind, KindSummary
-from .results import result_model
-
-DEFAULT_URL = "http://127.0.0.1:8000"
-DEFAULT_TIMEOUT = httpx.Timeout(30.0, connect=5.0)
-Progress = Callable[[Job], None]
-
-
-def _configure(
-    base_url: str | None, api_key: str | None, max_retries: int, retry: RetryPolicy | None
-) -> tuple[str, dict[str, str], RetryPolicy]:
-    """Base URL, headers and retry policy, from the arguments or the environment."""
-    url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
-    key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
-    headers = {"User-Agent": "tumblescan-client/0.1"}
-    if key:
-        headers["Authorization"] = f"Bearer {key}"
-    return url, headers, retry or RetryPolicy(max_retries=max_retries)
-
-
-def _transport_error(exc: httpx.TransportError) -> Exception:
-    if isinstance(exc, httpx.TimeoutException):
-        return APITimeoutError(f"request timed out: {exc}")
-    return APIConnectionError(f"cannot reach the service: {exc}")
-
-
-def _retry_delay(policy: RetryPolicy, attempt: int, resp: httpx.Response | None, error: Exception | None) -> float:
-    """Seconds to wait before the next try; raises the final error when none is left."""
-    if not policy.should_retry(attempt, resp):
-        if resp is not None:
-            raise error_for(resp)
-        assert error is not None
-        raise error
-    return policy.delay(attempt, resp)
-
-
-PathLike = str | os.PathLike[str]
-Files = Mapping[str, PathLike | Sequence[PathLike]]
-DEFAULT_KIND = "linescan-motion"
-
-
-def _create_body(
-    kind: str, input: dict[str, Any] | None, tracks: dict[str, Any] | None, options: Any
-) -> dict[str, Any]:
-    """The JSON of POST /v1/jobs; ``tracks=`` is the linescan-motion shorthand for ``input``."""
-    if (input is None) == (tracks is None):
-        raise TypeError("give the job's input as input=... (or tracks=... for linescan-motion)")
-    return {"kind": kind, "input": input if input is not None else {"tracks": tracks}, "options": options or {}}
-
-
-def _upload_request(
-    kind_or_path: str | os.PathLike[str],
-    files: Files | None,
-    legacy: dict[str, PathLike | None],
-    kind: str | None,
-) -> tuple[str, dict[str, list[PathLike]]]:
-    """The kind and its files by part. ``upload(kind, files={...})``, or as before the kinds
-    came, ``upload(path, cloud=..., truth=...)`` for linescan-motion's ``file``."""
-    if files is None:
-        named: dict[str, list[PathLike]] = {"file": [kind_or_path]}
-        named |= {k: [v] for k, v in legacy.items() if v is not None}
-        return kind or DEFAULT_KIND, named
-    if kind is not None or any(v is not None for v in legacy.values()):
-        raise TypeError("with files=..., give the kind as the first argument and every file in files")
-    parts = {k: [v] if isinstance(v, str | os.PathLike) else list(v) for k, v in files.items()}
-    return str(kind_or_path), parts
-
-
-def _open_parts(parts: dict[str, list[PathLike]]) -> list[tuple[str, tuple[str, BinaryIO, str]]]:
-    """Multipart file parts (several may share a field); the caller closes them."""
-    opened: list[tuple[str, tuple[str, BinaryIO, str]]] = []
-    try:
-        for field, paths in parts.items():
-            for p in paths:
-                opened.append((field, (Path(p).name, open(p, "rb"), "application/octet-stream")))  # noqa: SIM115
-    except BaseException:
-        _close(opened)
-        raise
-    return opened
-
-
-def _close(files: list[tuple[str, tuple[str, BinaryIO, str]]]) -> None:
-    for _, (_, fh, _) in files:
-        fh.close()
-
-
-def _typed_result(job: Job) -> BaseModel:
-    if job.status != "succeeded" or job.result is None:
-        raise JobFailedError(job)
-    return result_model(job.kind).model_validate(job.result)
-
-
-def _next_poll(delay: float) -> float:
-    return min(delay * 1.5, 2.0)
-
-
-LONG_POLL_S = 10.0
-
-
-def _hold(deadline: float | None) -> float:
-    """How long the service may hold one long-poll request."""
-    if deadline is None:
-        return LONG_POLL_S
-    return round(max(0.0, min(LONG_POLL_S, deadline - time.monotonic())), 3)
 
 
 class Jobs:
@@ -137,7 +50,7 @@ class Jobs:
         timeout: float | None = None,
     ) -> Job:
         """Queue a job from JSON input (``client.kinds.get(kind)`` tells which forms take JSON)."""
-        body = _create_body(kind, input, tracks, options)
+        body = create_body(kind, input, tracks, options)
         return Job.model_validate(self._c._request("POST", "/v1/jobs", json=body, timeout=timeout).json())
 
     def upload(
@@ -154,19 +67,19 @@ class Jobs:
         """Queue a job from files: ``upload("panel-axis", files={"meta": "meta.json", "image": "img.png"})``;
         a part may take several files (a list). ``upload(path, cloud=..., truth=...)`` still works
         for linescan-motion."""
-        kind_name, parts = _upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        kind_name, parts = upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
         if legacy:
             raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
 
         def send() -> httpx.Response:
-            opened = _open_parts(parts)
+            opened = open_parts(parts)
             data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return self._c._http.request(
                     "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(opened)
+                close_parts(opened)
 
         return Job.model_validate(self._c._send(send).json())
 
@@ -179,7 +92,7 @@ class Jobs:
         deadline = None if timeout is None else time.monotonic() + timeout
         delay = 0.01
         while True:
-            job = self._get_waiting(job_id, _hold(deadline))
+            job = self._get_waiting(job_id, long_poll_hold(deadline))
             if on_progress:
                 on_progress(job)
             if job.done:
@@ -187,7 +100,7 @@ class Jobs:
             if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             time.sleep(delay)
-            delay = _next_poll(delay)
+            delay = next_poll(delay)
 
     def _get_waiting(self, job_id: str, hold_s: float) -> Job:
         resp = self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold_s}, timeout=hold_s + 30)
@@ -196,7 +109,7 @@ class Jobs:
     def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
         """Wait for the job and return its result, typed by its kind (``MotionResult`` for
         linescan-motion; see ``tumblescan_client.results``); JobFailedError otherwise."""
-        return _typed_result(self.wait(job_id, timeout=timeout))
+        return typed_result(self.wait(job_id, timeout=timeout))
 
     def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
         """The files a succeeded job has (its kind's artifacts and its report)."""
@@ -298,7 +211,7 @@ class Client:
         retry: RetryPolicy | None = None,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
-        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        url, headers, self.retry = configure(base_url, api_key, max_retries, retry)
         self._http = httpx.Client(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = Jobs(self)
         self.kinds = Kinds(self)
@@ -312,10 +225,10 @@ class Client:
             try:
                 resp, error = send(), None
             except httpx.TransportError as exc:
-                resp, error = None, _transport_error(exc)
+                resp, error = None, transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            time.sleep(_retry_delay(self.retry, attempt, resp, error))
+            time.sleep(retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     def close(self) -> None:
@@ -343,7 +256,7 @@ class AsyncJobs:
         tracks: dict[str, Any] | None = None,
         timeout: float | None = None,
     ) -> Job:
-        body = _create_body(kind, input, tracks, options)
+        body = create_body(kind, input, tracks, options)
         return Job.model_validate((await self._c._request("POST", "/v1/jobs", json=body, timeout=timeout)).json())
 
     async def upload(
@@ -357,19 +270,19 @@ class AsyncJobs:
         timeout: float | None = None,
         **legacy: Any,
     ) -> Job:
-        kind_name, parts = _upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
+        kind_name, parts = upload_request(kind, files, {"cloud": cloud, "truth": truth}, legacy.pop("kind", None))
         if legacy:
             raise TypeError(f"unexpected argument(s): {', '.join(legacy)}")
 
         async def send() -> httpx.Response:
-            opened = _open_parts(parts)
+            opened = open_parts(parts)
             data = {"options": json.dumps(options or {}), "kind": kind_name}
             try:
                 return await self._c._http.request(
                     "POST", "/v1/jobs/upload", files=opened, data=data, timeout=timeout or httpx.USE_CLIENT_DEFAULT
                 )
             finally:
-                _close(opened)
+                close_parts(opened)
 
         return Job.model_validate((await self._c._send(send)).json())
 
@@ -380,7 +293,7 @@ class AsyncJobs:
         deadline = None if timeout is None else time.monotonic() + timeout
         delay = 0.01
         while True:
-            hold = _hold(deadline)
+            hold = long_poll_hold(deadline)
             resp = await self._c._request("GET", f"/v1/jobs/{job_id}", params={"wait": hold}, timeout=hold + 30)
             job = Job.model_validate(resp.json())
             if on_progress:
@@ -390,10 +303,10 @@ class AsyncJobs:
             if deadline is not None and time.monotonic() >= deadline:
                 raise WaitTimeoutError(f"job {job_id} still {job.status} after {timeout} s")
             await asyncio.sleep(delay)
-            delay = _next_poll(delay)
+            delay = next_poll(delay)
 
     async def result(self, job_id: str, *, timeout: float | None = 600.0) -> Any:
-        return _typed_result(await self.wait(job_id, timeout=timeout))
+        return typed_result(await self.wait(job_id, timeout=timeout))
 
     async def artifacts(self, job_id: str, *, timeout: float | None = None) -> list[Artifact]:
         resp = await self._c._request("GET", f"/v1/jobs/{job_id}/artifacts", timeout=timeout)
@@ -466,7 +379,7 @@ class AsyncClient:
         retry: RetryPolicy | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        url, headers, self.retry = _configure(base_url, api_key, max_retries, retry)
+        url, headers, self.retry = configure(base_url, api_key, max_retries, retry)
         self._http = httpx.AsyncClient(base_url=url, headers=headers, timeout=timeout, transport=transport)
         self.jobs = AsyncJobs(self)
         self.kinds = AsyncKinds(self)
@@ -483,10 +396,10 @@ class AsyncClient:
             try:
                 resp, error = await send(), None
             except httpx.TransportError as exc:
-                resp, error = None, _transport_error(exc)
+                resp, error = None, transport_error(exc)
             if resp is not None and resp.status_code < 400:
                 return resp
-            await asyncio.sleep(_retry_delay(self.retry, attempt, resp, error))
+            await asyncio.sleep(retry_delay(self.retry, attempt, resp, error))
             attempt += 1
 
     async def close(self) -> None:

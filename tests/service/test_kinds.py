@@ -4,8 +4,12 @@ checked per input form, uploads by the kind's parts, artifacts by name."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
@@ -19,8 +23,14 @@ from ..live import serve, wait_job
 
 
 @pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
-    with serve(tmp_path_factory.mktemp("kinds") / "data") as url, httpx.Client(base_url=url, timeout=30) as c:
+def url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    with serve(tmp_path_factory.mktemp("kinds") / "data") as u:
+        yield u
+
+
+@pytest.fixture(scope="module")
+def http(url: str) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=url, timeout=30) as c:
         yield c
 
 
@@ -120,7 +130,7 @@ def test_artifacts_of_an_unfinished_job_are_409(http: httpx.Client) -> None:
     wait_job(http, job["id"])
 
 
-def tracks_doc(seed: int) -> dict[str, object]:
+def tracks_doc(seed: int) -> dict[str, Any]:
     return tracks_to_json(tracks_for(seed)[1])
 
 
@@ -129,3 +139,53 @@ def _cloud_near(tracks: Tracks) -> TimedCloud:
     rng = np.random.default_rng(0)
     t_s = np.sort(rng.uniform(tracks.t_s.min(), tracks.t_s.max(), 500))
     return TimedCloud(rng.normal(size=(500, 3)) + tracks.xyz_m.mean(axis=0), t_s, {})
+
+
+def test_every_kind_refuses_garbage_in_every_part_with_a_422(http: httpx.Client) -> None:
+    # Driven by GET /v1/kinds alone, so each new kind is covered from the day it is registered.
+    rng = np.random.default_rng(7)
+    for summary in http.get("/v1/kinds").json():
+        kind = http.get(summary["url"]).json()
+        for form in kind["forms"]:
+            for part in form["parts"]:
+                junk = [(p["name"], (f"{p['name']}.bin", rng.bytes(300))) for p in form["parts"] if p["required"]]
+                junk += [(part["name"], (f"{part['name']}.bin", b"\x00\x01garbage"))] if not part["required"] else []
+                r = http.post("/v1/jobs/upload", data={"kind": kind["name"]}, files=junk)
+                assert r.status_code == 422, (kind["name"], form["name"], part["name"], r.text)
+                assert r.json()["detail"]["field"], r.text
+            if form["json_input"]:
+                r = http.post("/v1/jobs", json={"kind": kind["name"], "input": {"nonsense": [1, 2, 3]}})
+                assert r.status_code == 422 and r.json()["detail"]["field"], r.text
+
+
+def test_tracks_the_forced_closed_form_cannot_start_fail_with_a_code(http: httpx.Client) -> None:
+    # Three corners seen in every frame would do; here the third is seen in frames 0-2 only.
+    doc = tracks_doc(6)
+    counts = Counter(o["track"] for o in doc["observations"])
+    ids = [t for t, _ in counts.most_common(3)]
+    keep = [o for o in doc["observations"] if o["track"] in ids[:2] or (o["track"] == ids[2] and o["frame"] < 3)]
+    job = http.post(
+        "/v1/jobs", json={"input": {"tracks": {**doc, "observations": keep}}, "options": {"strategy": "lm"}}
+    )
+    assert job.status_code == 202, job.text
+    done = wait_job(http, job.json()["id"])
+    assert done["status"] == "failed" and done["error"]["code"] == "not_initializable", done
+    assert "use strategy 'auto' or 'swarm'" in done["error"]["message"]
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "tumblescan", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_submit_any_kind_by_its_parts_and_fetch_every_artifact(url: str, tmp_path: Path) -> None:
+    (tmp_path / "t.json").write_text(json.dumps(tracks_doc(8)))
+    out = tmp_path / "artifacts"
+    proc = cli("submit", "--kind", "linescan-motion", f"file={tmp_path / 't.json'}", "--wait", "--artifacts", str(out),
+               "--url", url)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert MotionResult.model_validate_json(proc.stdout).spin.rate_deg_s > 0
+    assert (out / "report.html").read_text().startswith("<!DOCTYPE html>")
+    proc = cli("submit", "--kind", "no-such-kind", str(tmp_path / "t.json"), "--url", url)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1
+    proc = cli("submit", str(tmp_path / "missing.json"), "--url", url)
+    assert proc.returncode == 2 and proc.stderr == f"error: no such file: {tmp_path / 'missing.json'}\n"

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from . import linescan, marker_pose, service
+from . import demo, linescan, marker_pose, service
 
 app = typer.Typer(
     add_completion=False,
@@ -29,6 +29,7 @@ for _name, _group in KIND_GROUPS:
 for _command in (linescan.simulate, linescan.estimate, linescan.rectify):
     app.command(help=f"{_command.__doc__}\n\nAlias of 'tumblescan linescan-motion {_command.__name__}'.")(_command)
 service.register(app)
+app.command()(demo.demo)
 
 
 def main() -> None:

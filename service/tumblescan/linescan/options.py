@@ -9,17 +9,12 @@ carries every option, for library users who call either estimator.
 
 from __future__ import annotations
 
-from typing import Literal
-
 from pydantic import BaseModel, ConfigDict, Field
 
+from .choices import ModelChoice, Objective, Strategy
 from .sensor import SensorNoise
 from .swarm import SwarmConfig
 from .tracks import MIN_FRAMES
-
-Strategy = Literal["auto", "lm", "swarm"]
-Objective = Literal["ml", "pairwise"]
-ModelChoice = Literal["auto", "spin-precession", "spin-only"]
 
 
 class DenseConfig(BaseModel):

@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from .._typing import FloatArray
 from ..errors import InvalidOptionError
@@ -94,6 +93,8 @@ def similarity(
     idx = np.array(free)
     var = np.einsum("ij,jk,ik->i", G, cov2[np.ix_(idx, idx)], G) * noise_scale**2
     d = float(np.max(np.abs(dg) / np.sqrt(np.maximum(var, 1e-300))))
+    from scipy import stats  # here, not at the top: the result model imports this module
+
     threshold = float(stats.norm.isf(alpha / (2 * len(dg))))
     return Similarity(d < threshold, d, threshold, "covariance")
 

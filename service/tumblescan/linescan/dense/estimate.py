@@ -25,23 +25,21 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
-from ...geometry.rotations import rotate
-from ...target.motion import rotation_matrices
 from ..errors import FramesUnusableError, NoSurfacesError
 from ..frames import Frames
-from ..initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
+from ..initializer import InitialGuess
 from ..options import FramesOptions
 from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validation_fields
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity, validation_frame_count
-from .consensus import INLIER_RAD, cone_consensus, pair_misfit, without_precession
+from .consensus import INLIER_RAD, pair_misfit, without_precession
 from .refine import DenseFit, refine_dense
-from .registration import VOXEL_FRACTION, PairTransforms, consistent_pairs, extent_m, register_consecutive
+from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .search import OverlapCost, swarm_start
+from .starts import Start, consensus_start, registration_start, retimed, vote
 from .surfels import DenseData, prepare
 
 # Registration works on a thinned copy of each frame: this many points at most.
@@ -142,28 +140,23 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
     setup = _Setup(data, reg, mid, voxel, extent, opts, noise, progress)
-    main, warnings = _best_attempt(setup, global_pairs)
+    best, warnings, attempts = _best_attempt(setup, global_pairs, n2)
     if data.spurious:
         warnings.append(
             f"{data.spurious} points ({100 * data.spurious / len(cloud):.1f} %) were left out of the fit as spurious "
             "returns (ranges far from the rest of their patch); they are rectified with the others"
         )
-    still_poor = _poor_fit(main.fit)
+    main, fit, check = best.solve, best.fit, best.check
+    still_poor = _poor_fit(fit)
     if still_poor is not None:
         warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
-    fit = main.fit
-    # 4. Model choice.
-    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
-        progress("refining", 0.66)
-        fit = refine_dense(
-            data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+    unmatched = np.flatnonzero(~np.isfinite(fit.frame_rms_m))
+    if len(unmatched):
+        warnings.append(
+            f"frame(s) {', '.join(map(str, unmatched))} had no surface matched in another frame (an edge-on or "
+            "featureless view): they constrain nothing and were left out of the fit and the check"
         )
-    # 5. Validate: do the first n2 frames alone support the motion?
-    check: Similarity | None = None
-    if n2 < n_frames:
-        progress("validating", 0.7)
-        check = _validate(setup, n2, fit)
-    else:
+    if n2 >= n_frames:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:
         warnings.append(
@@ -171,44 +164,93 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
             f"{check.distance:.3g} (threshold {check.threshold:.3g}); treat the estimate with caution"
         )
     progress("estimated", 1.0)
-    return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+    return _result(frames, fit, main, check, n2, T, warnings, attempts, time.perf_counter() - started)
 
 
-def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, list[str]]:
-    """The vote on rotation angles, then, if its motion fits poorly, the consensus over triplets
-    of pairs, then the swarm on the dense cost: the best fit (smallest residual scale) and its
-    warnings."""
+@dataclass(frozen=True)
+class _Attempt:
+    """One start carried through: its solve, the fit after the model choice, the check on the
+    first frames, and its warnings."""
+
+    solve: _Solve
+    fit: DenseFit
+    check: Similarity | None
+    warnings: list[str]
+
+    def problem(self) -> str | None:
+        """Why another start should be tried, or None when this one is sound. A frame without a
+        match (an edge-on view) is noted, not a reason: it says nothing against the motion."""
+        poor = _poor_fit(self.fit)
+        if poor is not None:
+            return poor
+        if self.check is not None and not self.check.passed:
+            return "the two-frame-count check failed"
+        return None
+
+    def flaws(self) -> tuple[bool, bool, int, float]:
+        """Order of preference: a fit that is not poor, a check that passed, fewer unmatched
+        frames, smaller residuals."""
+        failed = self.check is not None and not self.check.passed
+        unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
+        return (_poor_fit(self.fit) is not None, failed, unmatched, self.fit.scale)
+
+
+def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple[_Attempt, list[str], int]:
+    """The vote on rotation angles, then, if its motion fits poorly or fails the check, the
+    consensus over triplets of pairs, then the swarm on the dense cost: the first sound attempt,
+    or the least flawed one, its warnings and how many starts were made."""
     mid, seed = setup.mid, setup.opts.seed
-    attempts = (
-        (lambda: _vote(global_pairs, mid), "registration+cone+dense"),
-        (lambda: _consensus(global_pairs, mid, seed), "registration+consensus+dense"),
+    starts = (
+        (lambda: vote(global_pairs, mid), "registration+cone+dense"),
+        (lambda: consensus_start(global_pairs, mid, seed), "registration+consensus+dense"),
         (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
-    main: _Solve | None = None
-    kept: list[str] = []
+    best: _Attempt | None = None
     tried: list[str] = []
-    for begin, path in attempts:
+    made = 0
+    for begin, path in starts:
+        made += 1
         if tried:
             setup.progress("initializing", 0.05)
         attempt_warnings: list[str] = []
         try:
-            alt = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
+            solve = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
         except NoSurfacesError:
             raise
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
-        if main is None or alt.fit.scale < main.fit.scale:
-            main, kept = alt, attempt_warnings
-        poor = _poor_fit(alt.fit)
-        if poor is None:
+        attempt = _judged(setup, solve, n2, attempt_warnings)
+        if best is None or attempt.flaws() < best.flaws():
+            best = attempt
+        problem = attempt.problem()
+        if problem is None:
             break
-        tried.append(f"{path}: {poor}")
-    if main is None:
+        tried.append(f"{path}: {problem}")
+    if best is None:
         raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
-    if tried and main.path != attempts[0][1]:
-        kept = [*kept, "the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}"]
-    return main, kept
+    kept = list(best.warnings)
+    if tried:
+        outcome = "no start was sound" if best.problem() else "the motion comes from " + best.solve.path
+        kept.append(f"{len(tried)} start(s) tried before ({'; '.join(tried)}); {outcome}")
+    return best, kept, made
+
+
+def _judged(setup: _Setup, solve: _Solve, n2: int, warnings: list[str]) -> _Attempt:
+    """The model choice and the two-frame-count check on one solve."""
+    fit, opts = solve.fit, setup.opts
+    # 4. Model choice.
+    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
+        setup.progress("refining", 0.66)
+        fit = refine_dense(
+            setup.data, solve.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+        )
+    # 5. Validate: do the first n2 frames alone support the motion?
+    check = None
+    if n2 < setup.data.n_frames:
+        setup.progress("validating", 0.7)
+        check = _validate(setup, n2, fit)
+    return _Attempt(solve, fit, check, warnings)
 
 
 def _never_backwards(progress: Progress) -> Progress:
@@ -242,104 +284,19 @@ def _frame_taus(tau: FloatArray, frame: NDArray[np.int64], n_frames: int) -> Flo
     return np.asarray(np.bincount(frame, weights=tau, minlength=n_frames) / np.bincount(frame, minlength=n_frames))
 
 
-def _retimed(
-    xyz: FloatArray, tau: FloatArray, frame: NDArray[np.int64], mid: FloatArray, pairs: PairTransforms, start: _Start
-) -> FloatArray:
-    """Points moved to their frame's mean time, rotating at the mean angular velocity of the pairs
-    just before and after each frame. Voted start: the inlier pairs only (their median for a
-    frame with none), about their common fixed point. Otherwise: registered where the pair
-    agrees with the hypothesis, predicted by it where not, about the hypothesis's centre."""
-    ok = start.inliers
-    R = pairs.R if start.voted else np.where(ok[:, None, None], pairs.R, _predicted(start.guess.x, mid).R)
-    rotvec = Rotation.from_matrix(R).as_rotvec() / np.diff(mid)[:, None]
-    omega = np.empty((len(mid), 3))
-    for f in range(len(mid)):
-        near = [k for k in (f - 1, f) if 0 <= k < len(rotvec) and (ok[k] or not start.voted)]
-        omega[f] = rotvec[near].mean(axis=0) if near else np.median(rotvec[ok], axis=0)
-    center = center_from_transforms(pairs.R[ok], pairs.t[ok]) if start.voted else start.guess.x[6:9]
-    w = omega[frame]
-    rate = np.linalg.norm(w, axis=1)
-    axis = w / np.maximum(rate, 1e-300)[:, None]
-    return np.asarray(center + rotate(axis, rate * (mid[frame] - tau), xyz - center), dtype=float)
-
-
-def _predicted(x: FloatArray, mid: FloatArray) -> PairTransforms:
-    """The transforms between consecutive frames' mean times that motion ``x`` predicts."""
-    R = rotation_matrices(x, mid)
-    Q = R[1:] @ np.swapaxes(R[:-1], 1, 2)
-    center = x[6:9]
-    n = len(Q)
-    return PairTransforms(Q, center - Q @ center, np.zeros(n), np.zeros(n))
-
-
-def _registration_start(pairs: PairTransforms, start: _Start, mid: FloatArray) -> PairTransforms:
-    """ICP starts: the registered transform where the pair agrees with the hypothesis (or for
-    every pair after a vote), the predicted one where it does not (a pair registered onto a
-    turned copy gets another chance)."""
-    if start.voted:
-        return pairs
-    predicted = _predicted(start.guess.x, mid)
-    keep = start.inliers
-    return PairTransforms(
-        np.where(keep[:, None, None], pairs.R, predicted.R),
-        np.where(keep[:, None], pairs.t, predicted.t),
-        pairs.fitness,
-        pairs.rmse_m,
-    )
-
-
-@dataclass(frozen=True)
-class _Start:
-    """A starting motion and its inlier pairs; ``voted``: chosen by the vote on rotation angles."""
-
-    guess: InitialGuess
-    inliers: NDArray[np.bool_]
-    voted: bool = False
-
-
-def _vote(pairs: PairTransforms, mid: FloatArray) -> _Start:
-    """The cone on the pairs whose rotation angle is near the median (every pair of the cone
-    has the same angle): the path measured on the paper's grid."""
-    ok = consistent_pairs(pairs)
-    k = np.flatnonzero(ok)
-    if len(k) < 3:
-        raise FramesUnusableError(
-            f"only {len(k)} of {len(ok)} consecutive frame pairs could be registered consistently; the initial "
-            "motion needs 3 (do the frames overlap, and is the target rotating less than ~90 degrees per frame?)",
-            field="file",
-        )
-    try:
-        guess = motion_from_transforms(pairs.R[k], pairs.t[k], mid[k], mid[k + 1], 0.0)
-    except InitializerError as exc:
-        raise FramesUnusableError(f"the initial motion could not be formed: {exc}", field="file") from None
-    return _Start(guess=guess, inliers=ok, voted=True)
-
-
-def _consensus(pairs: PairTransforms, mid: FloatArray, seed: int) -> _Start:
-    try:
-        found = cone_consensus(pairs.R, pairs.t, mid[:-1], mid[1:], 0.0, seed=seed)
-        return _Start(guess=found.guess, inliers=found.inliers)
-    except InitializerError as exc:
-        raise FramesUnusableError(
-            f"the initial motion could not be formed from the registered frame pairs: {exc} (do the frames "
-            "overlap, and is the target rotating less than ~90 degrees per frame?)",
-            field="file",
-        ) from None
-
-
-def _solve(setup: _Setup, pairs: PairTransforms, start: _Start, warnings: list[str], *, path: str) -> _Solve:
+def _solve(setup: _Setup, pairs: PairTransforms, start: Start, warnings: list[str], *, path: str) -> _Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
     for p in range(RETIME_PASSES):
         progress("registering", 0.1 * (p + 1) / RETIME_PASSES)
-        xyz = _retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
-        initial = _registration_start(pairs, start, mid)
+        xyz = retimed(reg.xyz_m, reg.tau_s, reg.frame, mid, pairs, start)
+        initial = registration_start(pairs, start, mid)
         pairs = register_consecutive(
             reg.split(xyz, setup.data.n_frames), voxel_m=setup.voxel_m, initial=initial, seed=opts.seed
         )
-        start = _vote(pairs, mid) if start.voted else _consensus(pairs, mid, opts.seed)
+        start = vote(pairs, mid) if start.voted else consensus_start(pairs, mid, opts.seed)
     progress("initializing", 0.1)
     used = int(start.inliers.sum())
     if used < len(start.inliers):
@@ -373,17 +330,13 @@ def _solve(setup: _Setup, pairs: PairTransforms, start: _Start, warnings: list[s
 
 
 def _poor_fit(fit: DenseFit) -> str | None:
-    """Why the refined motion cannot be right, or None: residuals many times their model sigma,
-    or frames left without a single match."""
+    """Why the refined motion cannot be right, or None: residuals many times their model sigma."""
     if not fit.scale <= POOR_SCALE:
         return f"residuals {fit.scale:.1f} times their expected size"
-    unmatched = int(np.sum(~np.isfinite(fit.frame_rms_m)))
-    if unmatched:
-        return f"{unmatched} of {len(fit.frame_rms_m)} frames without a match"
     return None
 
 
-def _swarm(setup: _Setup, pairs: PairTransforms) -> _Start:
+def _swarm(setup: _Setup, pairs: PairTransforms) -> Start:
     """The swarm's start (:mod:`tumblescan.dense_search`) and the pairs that agree with it."""
     reg, mid, extent, seed = setup.reg, setup.mid, setup.extent_m, setup.opts.seed
     cost = OverlapCost.for_extent(reg.xyz_m, reg.tau_s, reg.frame, setup.data.n_frames, extent_m=extent, seed=seed)
@@ -391,7 +344,7 @@ def _swarm(setup: _Setup, pairs: PairTransforms) -> _Start:
         found = swarm_start(pairs.R, pairs.t, mid, cost, extent, seed=seed)
     except ValueError as exc:
         raise FramesUnusableError(f"the swarm found no start: {exc}", field="file") from None
-    return _Start(
+    return Start(
         guess=InitialGuess(x=found.x, x_spin_only=without_precession(found.x), cone_collapsed=False, passes=1),
         inliers=pair_misfit(found.x, pairs.R, mid[:-1], mid[1:]) < INLIER_RAD,
     )
@@ -442,6 +395,7 @@ def _result(
     n2: int,
     T: float,
     warnings: list[str],
+    attempts: int,
     elapsed_s: float,
 ) -> MotionResult:
     x = fit.x
@@ -466,7 +420,7 @@ def _result(
             "solver": {
                 "path": f"{main.path} ({main.pairs_used} frame pairs)",
                 "iterations": fit.iterations,
-                "attempts": 1,
+                "attempts": attempts,
                 "elapsed_s": elapsed_s,
             },
             "warnings": warnings,

@@ -1,7 +1,7 @@
 """Dense frames end to end: accuracy against truth and against corner tracks, rectification
 error due to the motion estimate, time per stage and peak memory of a whole job.
 
-    python -m bench.dense [--motions 30] [--distances 50 100]
+    python -m bench.linescan.dense [--motions 30] [--distances 50 100]
 
 Each motion: simulate 15 frames of 512 x 512 (Table 1 scanner and noise), write them as a
 binary PLY, then time a whole job as the worker runs it (read, assemble, estimate, rectify,
@@ -36,7 +36,7 @@ from tumblescan import (
 )
 from tumblescan.linescan.result import MotionResult
 
-from .common import machine, out_dir, table
+from ..common import machine, out_dir, table
 from .dense_bound import dense_bound, fitted_hits
 
 

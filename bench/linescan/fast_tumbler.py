@@ -1,6 +1,6 @@
 """Fast tumblers from dense frames: how often the estimate is right beyond the paper's rates.
 
-    python -m bench.fast_tumbler [--motions 12] [--size 256] [--spin 40 90] [--precession 3 30]
+    python -m bench.linescan.fast_tumbler [--motions 12] [--size 256] [--spin 40 90] [--precession 3 30]
 
 Each motion: random axes (at least 10 deg apart), spin and precession rates uniform in the
 given ranges (deg/s), 15 frames of ``size x size`` at 50 m with Table 1 noise and frame
@@ -23,7 +23,7 @@ import numpy as np
 from tumblescan import Scanner, Scene, TimedCloud, assemble_frames, estimate_from_frames, random_motion, simulate_frames
 from tumblescan.linescan.truth import errors_against
 
-from .common import machine, out_dir, table
+from ..common import machine, out_dir, table
 
 LIMITS = {"spin_axis_deg": 0.02, "spin_rate_deg_s": 0.01, "precession_axis_deg": 0.02, "precession_rate_deg_s": 0.01}
 

@@ -9,7 +9,7 @@ Fig. 4: the four swarm variants (pso, tvac, apso, naiwpso), population 100, 35 i
 100 runs per motion state with the best and worst 10 (by final fitness) dropped; the mean
 best-fitness curve per variant, and how often swarm + LM reaches the truth.
 
-Usage: python -m bench.solvers [--scenarios 30] [--states 4] [--runs 100]
+Usage: python -m bench.linescan.solvers [--scenarios 30] [--states 4] [--runs 100]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from tumblescan.linescan.sparse.search import swarm_search
 from tumblescan.linescan.swarm import VARIANTS
 from tumblescan.target.motion import canonical_params
 
-from .common import machine, out_dir, scenario, table
+from ..common import machine, out_dir, scenario, table
 
 SUCCESS = 1e-6
 

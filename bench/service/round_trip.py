@@ -2,7 +2,7 @@
 one worker process per core): round trip of one small tracks job (submit to result, one at a
 time) and the throughput of 100 small jobs submitted at once by an async client.
 
-Usage: python -m bench.service [--round-trips 30] [--jobs 100]
+Usage: python -m bench.service.round_trip [--round-trips 30] [--jobs 100]
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from tumblescan import tracks_to_json
 from tumblescan_client import AsyncClient, Client
 
-from .common import machine, out_dir, scenario, table
+from ..common import machine, out_dir, scenario, table
 
 
 def round_trips(url: str, tracks: list[dict], n: int) -> np.ndarray:

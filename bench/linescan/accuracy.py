@@ -24,7 +24,7 @@ from tumblescan.linescan.validation import axis_sigma_rad
 from tumblescan.numerics.covariance import covariance
 from tumblescan.target.motion import Motion
 
-from .common import machine, out_dir, scenario, table
+from ..common import machine, out_dir, scenario, table
 
 QUANTITIES = ("spin_axis_deg", "spin_rate_deg_s", "precession_axis_deg", "precession_rate_deg_s", "center_m")
 

@@ -5,7 +5,7 @@ Checks that every job succeeds and that every result equals a direct library cal
 same seed; prints throughput, p50/p99 submit latency, p50/p99 time to result, and the p99 of
 a health check polled throughout (requirement: under 100 ms while the workers are saturated).
 
-Usage: python -m bench.load [--jobs 500] [--clients 50] [--modes embedded,scaleout]
+Usage: python -m bench.service.load [--jobs 500] [--clients 50] [--modes embedded,scaleout]
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 from tumblescan import EstimateOptions, estimate_motion, tracks_from_json, tracks_to_json
 from tumblescan_client import AsyncClient
 
-from .common import machine, scenario, table
+from ..common import machine, scenario, table
 
 VARIANTS = 10  # distinct (tracks, seed) inputs, each checked against the library
 

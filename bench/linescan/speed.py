@@ -2,7 +2,7 @@
 4 million points, peak memory.
 
 Requirements: median <= 50 ms (auto) and <= 300 ms (swarm); 4 M points rectified < 1 s.
-Usage: python -m bench.speed [--scenarios 100]
+Usage: python -m bench.linescan.speed [--scenarios 100]
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from tumblescan import EstimateOptions, estimate_motion, random_motion, rectify
 
-from .common import machine, out_dir, scenario, table
+from ..common import machine, out_dir, scenario, table
 
 
 def time_estimates(n: int, strategy: str) -> np.ndarray:
