@@ -103,3 +103,10 @@ def test_csv_round_trip(tmp_path: Path) -> None:
     assert data.n_frames == ref.n_frames
     assert data.layout is not None and data.layout.ids == ref.layout.ids  # type: ignore[union-attr]
     assert abs(data.xyz_m - ref.xyz_m).max() < 1e-9
+
+
+def test_garbage_file_is_refused_naming_the_part(tmp_path: Path) -> None:
+    (tmp_path / "m.bin").write_bytes(b"\x00\x01garbage")
+    with pytest.raises(InputError) as err:
+        read_markers(tmp_path / "m.bin")
+    assert err.value.code == "malformed_input" and err.value.field == "markers"

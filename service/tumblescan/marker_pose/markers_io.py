@@ -76,7 +76,7 @@ class MarkerInput:
         return len(self.frames)
 
 
-def sniff(path: Path) -> str:
+def sniff(path: Path, field: str = "markers") -> str:
     """'json' or 'csv' from the first bytes (names are not trusted)."""
     with open(path, "rb") as fh:
         head = fh.read(256).lstrip()
@@ -84,7 +84,9 @@ def sniff(path: Path) -> str:
         return "json"
     if head.lower().startswith(b"frame"):
         return "csv"
-    raise MalformedInputError("markers must be JSON (tumblescan.markers.v1) or CSV with a header frame,t,track,x,y,z")
+    raise MalformedInputError(
+        f"{field} must be JSON (tumblescan.markers.v1) or CSV with a header frame,t,track,x,y,z", field=field
+    )
 
 
 def read_markers(
