@@ -219,19 +219,12 @@ def motion_graph(
     values = gtsam.Values()
     psd = np.array([q_rot] * 3 + [q_trans] * 3)
     n_motion = 0
+    starts = _initial_poses(t_s, R, t, measured, nodes)
     for j, node in enumerate(nodes):
         k = int(node)
-        if measured[k]:
-            Rk, tk = R[k], t[k]
-        else:  # between two measured frames: interpolate the start
-            a, b = meas[meas < k][-1], meas[meas > k][0]
-            w = (t_s[k] - t_s[a]) / (t_s[b] - t_s[a])
-            from .geometry import exp_so3, log_so3
-
-            Rk = exp_so3(w * log_so3(R[b] @ R[a].T)) @ R[a]
-            tk = (1 - w) * t[a] + w * t[b]
+        Rk, tk = starts[k]
         values.insert(X(k), _pose(Rk, tk))
-        values.insert(V(k), np.zeros(6))
+        values.insert(V(k), _initial_twist(starts, nodes, j, t_s))
         if measured[k]:
             Jinv = np.zeros((6, 6))
             Jinv[:3, :3] = Rk.T
@@ -280,6 +273,38 @@ def motion_graph(
         "time_s": time.perf_counter() - started,
     }
     return Rout, tout, cout, status, info
+
+
+def _initial_poses(
+    t_s: FloatArray, R: FloatArray, t: FloatArray, measured: BoolArray, nodes: IntArray
+) -> dict[int, tuple[FloatArray, FloatArray]]:
+    """Each node's starting pose: its fit, or between two fits, the interpolation of their poses."""
+    from .geometry import exp_so3, log_so3
+
+    meas = np.flatnonzero(measured)
+    out: dict[int, tuple[FloatArray, FloatArray]] = {}
+    for node in nodes:
+        k = int(node)
+        if measured[k]:
+            out[k] = (R[k], t[k])
+            continue
+        a, b = meas[meas < k][-1], meas[meas > k][0]
+        w = (t_s[k] - t_s[a]) / (t_s[b] - t_s[a])
+        out[k] = (exp_so3(w * log_so3(R[b] @ R[a].T)) @ R[a], (1 - w) * t[a] + w * t[b])
+    return out
+
+
+def _initial_twist(
+    starts: dict[int, tuple[FloatArray, FloatArray]], nodes: IntArray, j: int, t_s: FloatArray
+) -> FloatArray:
+    """A node's starting body twist, from its pose and its neighbour's (LM starts near the answer)."""
+    import gtsam
+
+    a, b = (int(nodes[j]), int(nodes[j + 1])) if j + 1 < len(nodes) else (int(nodes[j - 1]), int(nodes[j]))
+    if a == b or t_s[b] <= t_s[a]:
+        return np.zeros(6)
+    rel = _pose(*starts[a]).between(_pose(*starts[b]))
+    return np.asarray(gtsam.Pose3.Logmap(rel)) / (t_s[b] - t_s[a])
 
 
 def auto_psd(

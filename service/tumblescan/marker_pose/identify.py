@@ -26,6 +26,7 @@ CONFIRM_FRAMES = 1  # a new track is used once it sat on the same marker this ma
 MISS_FRAMES = 3  # a track that missed its marker this many frames in a row loses its identity
 PREDICT_FRAMES = 5  # a pose this recent predicts where the markers are
 RECENT_FRAMES = 25  # a search result must be within reach of a pose this recent
+SCRATCH_FRAMES = 3  # frames a 3-point identification from scratch must repeat in (layouts over 4 markers)
 BACKWARD_CONTEXT = 50  # frames after a left-out frame the backward pass runs through
 STEP_M = 0.02  # how far a marker may move per frame [m] (1 m/s at 50 Hz)
 LIKELIHOOD_RATIO_CHI2 = 2.0 * np.log(100.0)
@@ -89,14 +90,17 @@ def fit_robust(p_body_m: FloatArray, y_m: FloatArray, gates: Gates) -> Fit | Non
     keep = r <= gates.gate_m
     if not keep.all():
         if n >= 4:
-            best = keep
+            # The largest consensus of 3-point fits; of equal ones, the one its own fit explains best.
+            best, best_cost = keep, np.inf
             for c in combinations(range(n), 3):
                 Rc, tc = kabsch(p_body_m[list(c)], y_m[list(c)])
                 k = np.linalg.norm(y_m - p_body_m @ Rc.T - tc, axis=1) <= gates.gate_m
-                if k.sum() > best.sum():
-                    best = k
-                    if k.sum() == n - 1:
-                        break
+                if k.sum() < max(best.sum(), 3):
+                    continue
+                Rk, tk = kabsch(p_body_m[k], y_m[k])
+                cost = float(np.sum((y_m[k] - p_body_m[k] @ Rk.T - tk) ** 2))
+                if k.sum() > best.sum() or cost < best_cost:
+                    best, best_cost = k, cost
             keep = best
         for _ in range(n):
             if keep.sum() < 3:
@@ -221,6 +225,8 @@ class _Tracks:
         self.streak = np.zeros(n, dtype=np.int64)
         self.misses = np.zeros(n, dtype=np.int64)
         self.last_frame = -(10**9)
+        self.scratch_key: tuple[tuple[int, int], ...] = ()
+        self.scratch_count = 0
         self.last_R = np.eye(3)
         self.last_t = np.zeros(3)
 
@@ -239,7 +245,12 @@ def associate(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Associat
     np.add.at(window, todo + BACKWARD_CONTEXT + 1, -1)
     frames = np.flatnonzero(np.cumsum(window)[: data.n_frames] > 0)
     sub, sub_obs = _subset_reversed(data, frames)
-    bwd = _associate_pass(sub, layout_m, gates)
+    # Tracks start with the identity the forward pass first gave them: a stretch of 3 markers
+    # before a 4th one showed up is then identified by its tracks.
+    first = np.full(len(data.track_names), -1, dtype=np.int64)
+    inl = np.flatnonzero(fwd.obs_marker >= 0)[::-1]  # written last = the earliest
+    first[data.obs_track[inl]] = fwd.obs_marker[inl]
+    bwd = _associate_pass(sub, layout_m, gates, first)
     back = frames[::-1]  # sub's frame i is data's frame back[i]
     take = bwd.measured & ~bwd.ambiguous & ~fwd.measured[back] & ~fwd.ambiguous[back]
     dst = back[take]
@@ -275,7 +286,9 @@ def _subset_reversed(data: MarkerInput, frames: IntArray) -> tuple[MarkerInput, 
     return sub, obs
 
 
-def _associate_pass(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> Association:
+def _associate_pass(
+    data: MarkerInput, layout_m: FloatArray, gates: Gates, track_marker: IntArray | None = None
+) -> Association:
     F, N = data.n_frames, len(data.xyz_m)
     out = Association(
         obs_marker=np.full(N, -1, dtype=np.int64),
@@ -287,6 +300,8 @@ def _associate_pass(data: MarkerInput, layout_m: FloatArray, gates: Gates) -> As
         ambiguous=np.zeros(F, dtype=bool),
     )
     state = _Tracks(len(data.track_names))
+    if track_marker is not None:
+        state.marker[:] = track_marker
     starts = np.searchsorted(data.obs_frame, np.arange(F + 1))
     for f in range(F):
         idx = np.arange(starts[f], starts[f + 1])
@@ -360,6 +375,16 @@ def _frame(
             out.searches += 1
             hyps = [h for h in search(y, L, gates) if gap > RECENT_FRAMES or _near_pose(h[1], st, gap)]
         chosen = _choose(hyps, st.marker[tr])
+        # From scratch, 3 points of a layout of more than 4 markers are too weak a signature (a
+        # gross error can make another triangle fit): wait for a 4th marker or a recent pose.
+        scratch = gap > RECENT_FRAMES and not np.any(st.marker[tr] >= 0)
+        if chosen is not None and scratch and len(L) > 4 and np.sum(chosen[0] >= 0) < 4:
+            # ... unless the same tracks get the same markers in SCRATCH_FRAMES frames in a row.
+            key = tuple(sorted(zip(tr[chosen[0] >= 0].tolist(), chosen[0][chosen[0] >= 0].tolist(), strict=True)))
+            st.scratch_count = st.scratch_count + 1 if key == st.scratch_key else 1
+            st.scratch_key = key
+            if st.scratch_count < SCRATCH_FRAMES:
+                chosen = None
         if chosen is None:
             _misses(st, tr, assign)
             return
