@@ -27,6 +27,7 @@ def test_given_layout_is_efficient_and_covered(target: str, motion: str, seed: i
     assert ev["coverage"] >= 0.98
     assert 0.25 <= ev["nees_over_6"] <= 4
     assert abs(ev["drift_deg"]) < 0.5
+    assert ev["unbounded_worst_sigma"] < 5  # a frame measured without 3 true inliers is still within its covariance
 
 
 def test_layout_is_bootstrapped_when_none_is_given() -> None:

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from .geometry import launch_frame, log_so3, matrix_from_quat_wxyz, skew
-from .result import MarkerPoseResult
+from .result import FramePose, MarkerPoseResult
 
 
 def evaluate(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, float]:
@@ -31,18 +31,19 @@ def evaluate(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, float
     key = "crlb" if given else "crlb_self_calibrated"
     frames = {f["frame"]: f for f in truth["frames"]}
     d2, nees, errs, bound_frames, covered = [], [], [], 0, 0
+    unbounded: list[float] = []  # measured frames without 3 true inliers: error against the own covariance
     for pose in result.poses:
         tf = frames[pose.frame]
         if tf[key] is None:
+            if pose.status == "measured" and pose.T_world_body is not None and pose.cov is not None:
+                e = _error(tf, pose, R_c, o_c)
+                unbounded.append(float(np.sqrt(e @ np.linalg.solve(np.array(pose.cov), e))))
             continue
         bound_frames += 1
         if pose.status != "measured" or pose.T_world_body is None:
             continue
         covered += 1
-        R_t = matrix_from_quat_wxyz(np.array(tf["q_wxyz"])) @ R_c
-        t_t = np.array(tf["t_m"]) + matrix_from_quat_wxyz(np.array(tf["q_wxyz"])) @ o_c
-        R_e = matrix_from_quat_wxyz(np.array(pose.T_world_body.q_wxyz))
-        e = np.r_[log_so3(R_t @ R_e.T), t_t - np.array(pose.T_world_body.t_m)]
+        e = _error(tf, pose, R_c, o_c)
         A = np.eye(6)
         A[3:, :3] = -skew(matrix_from_quat_wxyz(np.array(tf["q_wxyz"])) @ o_c)
         C = A @ np.array(tf[key]) @ A.T
@@ -64,10 +65,21 @@ def evaluate(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, float
         "drift_deg": float(np.degrees(np.linalg.norm(E[half:, :3].mean(axis=0) - E[:half, :3].mean(axis=0))))
         if half
         else 0.0,
+        "unbounded_measured": float(len(unbounded)),
+        "unbounded_worst_sigma": max(unbounded, default=0.0),
         "drift_mm": float(1000 * np.linalg.norm(E[half:, 3:].mean(axis=0) - E[:half, 3:].mean(axis=0)))
         if half
         else 0.0,
     }
+
+
+def _error(tf: dict[str, Any], pose: FramePose, R_c: np.ndarray, o_c: np.ndarray) -> np.ndarray:
+    """``(log(R_t R_e^T), p_t - p_e)`` of one frame, the truth re-expressed in the estimate's body frame."""
+    assert pose.T_world_body is not None
+    R_true = matrix_from_quat_wxyz(np.array(tf["q_wxyz"]))
+    R_e = matrix_from_quat_wxyz(np.array(pose.T_world_body.q_wxyz))
+    t_t = np.array(tf["t_m"]) + R_true @ o_c
+    return np.asarray(np.r_[log_so3(R_true @ R_c @ R_e.T), t_t - np.array(pose.T_world_body.t_m)])
 
 
 def _marker_map(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, str]:
