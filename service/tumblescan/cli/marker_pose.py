@@ -65,8 +65,9 @@ def estimate(
         sys.stdout.write(result.model_dump_json() + "\n")
         return
     measured = sum(p.status == "measured" for p in result.poses)
+    bridged = sum(p.status == "bridged" for p in result.poses)
     typer.echo(
-        f"{len(result.poses)} frames, {measured} measured (coverage {result.coverage:.3f}), "
+        f"{len(result.poses)} frames, {measured} measured (coverage {result.coverage:.3f}), {bridged} bridged, "
         f"residual RMS {1000 * result.residuals.rms_m:.2f} mm, layout {result.layout.source} "
         f"({len(result.layout.markers)} markers), graph {result.graph.iterations} iterations"
     )
