@@ -54,6 +54,10 @@ RECIPES: dict[str, Recipe] = {
         simulate="tumblescan panel-axis simulate --out {out} --seed 3 --width-px 512 --height-px 384",
         jobs=[Job("near range", {"meta": "meta.json", "image": "image.png"})],
     ),
+    "marker-pose-graph": Recipe(
+        simulate="tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 200",
+        jobs=[Job("level A markers", {"markers": "markers.json"})],
+    ),
     "bearings": Recipe(
         simulate="tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",
         jobs=[

@@ -6,6 +6,7 @@ from pydantic import BaseModel, ConfigDict
 
 from .bearings import BearingsResult
 from .linescan import MotionResult
+from .marker_pose import MarkerPoseResult
 from .panel_axis import PanelAxisResult
 
 # Kind name -> result model (one line per kind, as in the service's registry).
@@ -13,6 +14,7 @@ RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
     "panel-axis": PanelAxisResult,
     "bearings": BearingsResult,
+    "marker-pose-graph": MarkerPoseResult,
 }
 
 
@@ -26,4 +28,12 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "BearingsResult", "MotionResult", "PanelAxisResult", "UnknownResult", "result_model"]
+__all__ = [
+    "RESULT_MODELS",
+    "BearingsResult",
+    "MarkerPoseResult",
+    "MotionResult",
+    "PanelAxisResult",
+    "UnknownResult",
+    "result_model",
+]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from . import bearings, demo, linescan, panel_axis, service
+from . import bearings, demo, linescan, marker_pose, panel_axis, service
 
 app = typer.Typer(
     add_completion=False,
@@ -21,6 +21,7 @@ app = typer.Typer(
 KIND_GROUPS: list[tuple[str, typer.Typer]] = [
     ("linescan-motion", linescan.app),
     ("panel-axis", panel_axis.app),
+    ("marker-pose-graph", marker_pose.app),
     ("bearings", bearings.app),
 ]
 for _name, _group in KIND_GROUPS:

@@ -19,11 +19,13 @@ def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
     from .kinds.bearings import Bearings
     from .kinds.linescan import LinescanMotion
+    from .kinds.marker_pose import MarkerPoseGraph
     from .kinds.panel_axis import PanelAxis
 
     listed: list[JobKind] = [
         LinescanMotion(),
         PanelAxis(),
+        MarkerPoseGraph(),
         Bearings(),
     ]
     return {k.name: k for k in listed}
