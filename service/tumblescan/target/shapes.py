@@ -109,6 +109,14 @@ def _rotation_z_to(axis: FloatArray) -> FloatArray:
     return np.column_stack([e1, np.cross(a, e1), a])
 
 
+def _bus(bus_m: tuple[float, float, float]) -> tuple[_Parts, tuple[float, float, float]]:
+    """A new shape with a box bus centred at the origin, and the bus's half sizes."""
+    half = (bus_m[0] / 2, bus_m[1] / 2, bus_m[2] / 2)
+    p = _Parts()
+    p.box(tuple(-h for h in half), half)
+    return p, half
+
+
 class _Parametric(BaseModel, ABC):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -160,9 +168,7 @@ class DishBoomShape(_Parametric):
     boom_width_m: float = Field(0.1, gt=0)
 
     def build(self) -> _Parts:
-        p = _Parts()
-        bx, by, bz = (v / 2 for v in self.bus_m)
-        p.box((-bx, -by, -bz), (bx, by, bz))
+        p, (bx, by, bz) = _bus(self.bus_m)
         p.dish(self.dish_radii_m[0], 0.55, (0, 0.3, 1), (0, 0, bz + 0.4))
         p.beam((0, 0, bz), (0, 0, bz + 0.4), 0.2, features=False)
         p.dish(self.dish_radii_m[1], 0.4, (0, 1, 0), (0, by + 0.5, 0))
@@ -180,9 +186,7 @@ class LongArrayShape(_Parametric):
     yoke_m: float = Field(1.2, gt=0)
 
     def build(self) -> _Parts:
-        p = _Parts()
-        bx, by, bz = (v / 2 for v in self.bus_m)
-        p.box((-bx, -by, -bz), (bx, by, bz))
+        p, (bx, _, _) = _bus(self.bus_m)
         p.beam((bx, 0, 0), (bx + self.yoke_m, 0, 0), 0.15)
         start = bx + self.yoke_m
         p.plate((start + self.array_m[0] / 2, 0, 0), (1, 0, 0), (0, 1, 0), *self.array_m, 0.05)
