@@ -8,11 +8,11 @@ STAMP := $(VENV)/.installed
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml client/pyproject.toml scripts/system-deps.sh
+$(STAMP): pyproject.toml client/pyproject.toml constraints.txt scripts/system-deps.sh
 	sh scripts/system-deps.sh
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ./client -e '.[dev]'
+	$(BIN)/python -m pip install -q -c constraints.txt -e ./client -e '.[dev]'
 	touch $(STAMP)
 
 demo: install
@@ -30,6 +30,7 @@ bench: install
 	$(BIN)/python -m bench.linescan.accuracy
 	$(BIN)/python -m bench.linescan.solvers
 	$(BIN)/python -m bench.linescan.speed
+	$(BIN)/python -m bench.panel_axis.run
 	$(BIN)/python -m bench.service.round_trip
 	$(BIN)/python -m bench.service.startup
 

@@ -27,6 +27,7 @@ from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, normal
 from tumblescan.linescan.sensor import perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad
+from tumblescan.target.shape import SatelliteShape
 
 FloatArray = NDArray[np.float64]
 # A hit belongs to a face when it lies within this of the face's plane (metres, body frame).
@@ -40,6 +41,8 @@ def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple
     R = np.asarray(scene.R_body_to_sensor, dtype=float)
     origin = np.asarray(motion.center_m) + np.asarray(scene.body_offset_m)
     body = (reference_m - origin) @ R  # R^T (p - origin), row-wise
+    if not isinstance(scene.shape, SatelliteShape):
+        raise ValueError(f"the dense bound is computed for the box satellite only, not {scene.shape.kind!r}")
     boxes = scene.shape.boxes()
     face = np.full(len(body), -1, dtype=np.int64)
     normals = np.zeros((6 * len(boxes), 3))

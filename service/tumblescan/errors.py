@@ -8,9 +8,11 @@ from __future__ import annotations
 
 
 class InputError(ValueError):
-    """Bad input to Tumblescan; the message says what and where."""
+    """Bad input to Tumblescan; the message says what and where. ``http_status`` is what the
+    API answers when it is found at submission (422 unless a kind's contract says otherwise)."""
 
     code = "invalid_input"
+    http_status = 422
 
     def __init__(self, message: str, *, field: str | None = None) -> None:
         super().__init__(message)

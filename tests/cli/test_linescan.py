@@ -147,3 +147,21 @@ def test_json_output_keeps_library_chatter_off_stdout() -> None:
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout) == {"ok": True}
     assert "Too few correspondences" in proc.stderr and "chatter from C" in proc.stderr
+
+
+def test_simulate_a_mesh_file_and_its_mistakes(tmp_path: Path) -> None:
+    from tumblescan._open3d import load_open3d
+
+    o3d = load_open3d()
+    mesh = o3d.geometry.TriangleMesh.create_box(6.0, 2.0, 2.0)
+    assert o3d.io.write_triangle_mesh(str(tmp_path / "target.obj"), mesh)
+    out = tmp_path / "sim"
+    args = ("linescan-motion", "simulate", "--out", str(out), "--lines", "48", "--pixels", "48", "--no-dense")
+    proc = run(*args, "--mesh", str(tmp_path / "target.obj"), "--size-m", "12", "--range-m", "60")
+    assert proc.returncode == 0, proc.stderr
+    scene = json.loads((out / "truth.json").read_text())["scene"]
+    assert scene["shape"]["kind"] == "mesh" and scene["shape"]["size_m"] == 12.0
+    proc = run(*args, "--mesh", str(tmp_path / "target.obj"))
+    assert proc.returncode == 2 and proc.stderr == "error: --mesh needs --size-m (its largest side in metres)\n"
+    proc = run(*args, "--mesh", str(tmp_path / "none.obj"), "--size-m", "3")
+    assert proc.returncode == 2 and "no such mesh file" in proc.stderr

@@ -83,3 +83,37 @@ def test_weak_perspective_without_a_prior_gives_the_image_angle_only(ground: Pat
     with pytest.raises(InputError) as exc:
         run(load_input(tmp_path / "meta.json"), EstimateOptions(require_axis=True))
     assert exc.value.code == "depth_unobservable" and exc.value.field == "prior"
+
+
+def test_a_pointing_matrix_in_ecef_gives_the_same_axis_as_azimuth_and_elevation(
+    near_clean: Path, tmp_path: Path
+) -> None:
+    from tumblescan.panel_axis.frames import R_cam_from_enu, R_ecef_from_enu
+
+    meta = json.loads((near_clean / "meta.json").read_text())
+    p, st = meta["pointing"], meta["station"]
+    R_cam_ecef = R_cam_from_enu(p["azimuth_deg"], p["elevation_deg"]) @ R_ecef_from_enu(st["lat_deg"], st["lon_deg"]).T
+    meta["pointing"] = {"frame": "ecef", "R_cam_from_ref": R_cam_ecef.tolist()}
+    meta["image"] = str((near_clean / "image.png").resolve())
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    a = run(load_input(near_clean / "meta.json")).axis
+    b = run(load_input(tmp_path / "meta.json")).axis
+    assert a is not None and b is not None
+    assert np.allclose(a.station_enu, b.station_enu, atol=1e-9) and np.allclose(a.ecef, b.ecef, atol=1e-9)  # type: ignore[arg-type]
+    assert b.pitch_deg == pytest.approx(a.pitch_deg) and b.sigma_yaw_deg == pytest.approx(a.sigma_yaw_deg)
+
+
+def test_a_16_bit_tiff_gives_the_same_answer_as_the_png(ground: Path, tmp_path: Path) -> None:
+    import tifffile
+
+    from tumblescan.imaging.image_io import read_image
+
+    img = read_image(ground / "image.png")
+    assert img.dtype == np.uint16
+    tifffile.imwrite(tmp_path / "image.tif", img)
+    meta = json.loads((ground / "meta.json").read_text())
+    meta["image"] = "image.tif"
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    a, b = run(load_input(ground / "meta.json")), run(load_input(tmp_path / "meta.json"))
+    assert a.image_angle_deg == pytest.approx(b.image_angle_deg, abs=1e-12)
+    assert [c.camera for c in a.candidates] == [c.camera for c in b.candidates]

@@ -61,6 +61,15 @@ def test_bad_meta_is_422_naming_the_field(http: httpx.Client, near_noisy: Path) 
     assert detail["field"] == "camera.cx_px" and detail["code"] == "invalid_input"
 
 
+def test_an_image_that_is_not_one_is_422_unreadable_image(http: httpx.Client, near_noisy: Path) -> None:
+    files = _files(near_noisy)
+    files["image"] = ("image.png", b"\x89PNG\r\n\x1a\n" + b"\0" * 200)
+    r = http.post("/v1/jobs/upload", data={"kind": "panel-axis"}, files=files)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["code"] == "unreadable_image" and detail["field"] == "image"
+
+
 def test_a_missing_part_and_an_unknown_option_are_422(http: httpx.Client, near_noisy: Path) -> None:
     files = _files(near_noisy)
     del files["image"]

@@ -4,6 +4,8 @@ checked per input form, uploads by the kind's parts, artifacts by name."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,8 +23,14 @@ from ..live import serve, wait_job
 
 
 @pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
-    with serve(tmp_path_factory.mktemp("kinds") / "data") as url, httpx.Client(base_url=url, timeout=30) as c:
+def url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    with serve(tmp_path_factory.mktemp("kinds") / "data") as u:
+        yield u
+
+
+@pytest.fixture(scope="module")
+def http(url: str) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=url, timeout=30) as c:
         yield c
 
 
@@ -163,3 +171,21 @@ def test_tracks_the_forced_closed_form_cannot_start_fail_with_a_code(http: httpx
     done = wait_job(http, job.json()["id"])
     assert done["status"] == "failed" and done["error"]["code"] == "not_initializable", done
     assert "use strategy 'auto' or 'swarm'" in done["error"]["message"]
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "tumblescan", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_submit_any_kind_by_its_parts_and_fetch_every_artifact(url: str, tmp_path: Path) -> None:
+    (tmp_path / "t.json").write_text(json.dumps(tracks_doc(8)))
+    out = tmp_path / "artifacts"
+    proc = cli("submit", "--kind", "linescan-motion", f"file={tmp_path / 't.json'}", "--wait", "--artifacts", str(out),
+               "--url", url)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert MotionResult.model_validate_json(proc.stdout).spin.rate_deg_s > 0
+    assert (out / "report.html").read_text().startswith("<!DOCTYPE html>")
+    proc = cli("submit", "--kind", "no-such-kind", str(tmp_path / "t.json"), "--url", url)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1
+    proc = cli("submit", str(tmp_path / "missing.json"), "--url", url)
+    assert proc.returncode == 2 and proc.stderr == f"error: no such file: {tmp_path / 'missing.json'}\n"

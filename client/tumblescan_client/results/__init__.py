@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict
 
+from .bearings import BearingsResult
 from .linescan import MotionResult
+from .marker_pose import MarkerPoseResult
 from .panel_axis import PanelAxisResult
 from .spin_rate import SpinResult
 
@@ -12,6 +14,8 @@ from .spin_rate import SpinResult
 RESULT_MODELS: dict[str, type[BaseModel]] = {
     "linescan-motion": MotionResult,
     "panel-axis": PanelAxisResult,
+    "bearings": BearingsResult,
+    "marker-pose-graph": MarkerPoseResult,
     "spin-from-images": SpinResult,
 }
 
@@ -26,4 +30,13 @@ def result_model(kind: str) -> type[BaseModel]:
     return RESULT_MODELS.get(kind, UnknownResult)
 
 
-__all__ = ["RESULT_MODELS", "MotionResult", "PanelAxisResult", "SpinResult", "UnknownResult", "result_model"]
+__all__ = [
+    "RESULT_MODELS",
+    "BearingsResult",
+    "MarkerPoseResult",
+    "MotionResult",
+    "PanelAxisResult",
+    "SpinResult",
+    "UnknownResult",
+    "result_model",
+]

@@ -57,6 +57,7 @@ class Panel(_Model):
     short_axis: Direction | None = None
     normal: Direction | None = None
     orthogonality_deg: float | None = None
+    orthogonality_sigma_deg: float | None = None
     edge_rms_px: float | None = None
     edges_px: Mat = []
     short_edges_px: Mat = []

@@ -34,7 +34,7 @@ def describe(errors: list[dict[str, Any]], prefix: str = "") -> str:
 def install(app: FastAPI) -> None:
     @app.exception_handler(InputError)
     async def _input(_: Request, exc: InputError) -> JSONResponse:
-        return error_response(422, exc.code, str(exc), field=exc.field)
+        return error_response(exc.http_status, exc.code, str(exc), field=exc.field)
 
     @app.exception_handler(OptionsError)
     async def _options(_: Request, exc: OptionsError) -> JSONResponse:

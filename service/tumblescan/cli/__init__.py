@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from . import linescan, panel_axis, service, spin_rate
+from . import bearings, demo, linescan, marker_pose, panel_axis, service, spin_rate
 
 app = typer.Typer(
     add_completion=False,
@@ -21,6 +21,8 @@ app = typer.Typer(
 KIND_GROUPS: list[tuple[str, typer.Typer]] = [
     ("linescan-motion", linescan.app),
     ("panel-axis", panel_axis.app),
+    ("marker-pose-graph", marker_pose.app),
+    ("bearings", bearings.app),
     ("spin-from-images", spin_rate.app),
 ]
 for _name, _group in KIND_GROUPS:
@@ -30,6 +32,7 @@ for _name, _group in KIND_GROUPS:
 for _command in (linescan.simulate, linescan.estimate, linescan.rectify):
     app.command(help=f"{_command.__doc__}\n\nAlias of 'tumblescan linescan-motion {_command.__name__}'.")(_command)
 service.register(app)
+app.command()(demo.demo)
 
 
 def main() -> None:

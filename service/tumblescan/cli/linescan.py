@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ..errors import InputError
-from ..linescan.choices import ModelChoice, Objective, Strategy
+from ..linescan.choices import ModelChoice, Objective, ShapeName, Strategy
 from .common import input_errors, json_stdout
 
 if TYPE_CHECKING:
@@ -29,7 +29,14 @@ app = typer.Typer(
 @input_errors
 def simulate(
     out: Annotated[Path, typer.Option(help="output directory")] = Path("sim"),
-    distance_m: Annotated[float, typer.Option(min=1.0, help="range to the precession centre")] = 50.0,
+    distance_m: Annotated[
+        float, typer.Option("--distance-m", "--range-m", min=1.0, help="range to the precession centre")
+    ] = 50.0,
+    shape: Annotated[
+        ShapeName, typer.Option(help="target: the box satellite or a shape of the library (docs/linescan.md)")
+    ] = "box",
+    mesh: Annotated[Path | None, typer.Option(help="target from a mesh file Open3D reads (GLB, OBJ, PLY, STL)")] = None,
+    size_m: Annotated[float | None, typer.Option(min=0.01, help="with --mesh: its largest side, metres")] = None,
     frames: Annotated[int, typer.Option(min=4, max=200)] = 15,
     seed: Annotated[int, typer.Option(min=0)] = 0,
     spin_rate_deg_s: Annotated[float | None, typer.Option(help="default: random in 15-37")] = None,
@@ -52,7 +59,9 @@ def simulate(
     ws = (spin_rate_deg_s, spin_rate_deg_s) if spin_rate_deg_s is not None else (15.0, 37.0)
     wp = (precession_rate_deg_s, precession_rate_deg_s) if precession_rate_deg_s is not None else (3.0, 14.0)
     motion = random_motion(rng, distance_m=distance_m, spin_rate_deg_s=ws, precession_rate_deg_s=wp)
-    scene = Scene(scanner=Scanner(lines=lines, pixels=pixels), frames=frames, noise=noise)
+    scene = Scene(
+        scanner=Scanner(lines=lines, pixels=pixels), frames=frames, noise=noise, shape=_shape(shape, mesh, size_m)
+    )
     out.mkdir(parents=True, exist_ok=True)
     tracks, track_truth = simulate_tracks(motion, scene, seed=seed)
     write_tracks(out / "tracks.json", tracks)
@@ -131,6 +140,23 @@ def estimate(
         out = rectified or (cloud.with_name(cloud.stem + "-rectified.ply") if cloud is not None else None)
     _write_outputs(outcome, tracks_file, out, report, truth)
     _print_result(outcome.result, as_json=as_json)
+
+
+def _shape(name: str, mesh: Path | None, size_m: float | None) -> Any:
+    """The simulated target: ``--mesh`` (with ``--size-m``) or a named shape."""
+    from ..target.shapes import PARAMETRIC, MeshFileShape, SatelliteShape
+
+    if mesh is None:
+        if size_m is not None:
+            raise InputError("--size-m goes with --mesh", field="size_m")
+        return PARAMETRIC[name]() if name in PARAMETRIC else SatelliteShape()
+    if name != "box":
+        raise InputError("give --shape or --mesh, not both", field="mesh")
+    if size_m is None:
+        raise InputError("--mesh needs --size-m (its largest side in metres)", field="size_m")
+    if not mesh.is_file():
+        raise InputError(f"no such mesh file: {mesh}", field="mesh")
+    return MeshFileShape(path=str(mesh.resolve()), size_m=size_m)
 
 
 def _refuse_for_frames(**given: object) -> None:

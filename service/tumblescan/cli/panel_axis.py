@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 import typer
 
-from .common import input_errors
+from .common import input_errors, json_stdout
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="panel-axis: a solar-panel axis from one optical image."
@@ -62,16 +62,17 @@ def estimate(
     from ..panel_axis.options import EstimateOptions
     from ..panel_axis.pipeline import load_input, run, write_result
 
-    data = load_input(meta, image)
-    result = run(data, EstimateOptions(method=method, require_axis=require_axis, seed=seed))
-    doc = result.to_json()
-    if out is not None:
-        write_result(out, result)
-    if report is not None:
-        from ..panel_axis.report import build_report
+    with json_stdout(as_json):  # OpenCV or Open3D chatter goes to stderr, not into the JSON
+        data = load_input(meta, image)
+        result = run(data, EstimateOptions(method=method, require_axis=require_axis, seed=seed))
+        doc = result.to_json()
+        if out is not None:
+            write_result(out, result)
+        if report is not None:
+            from ..panel_axis.report import build_report
 
-        truth_doc = json.loads(truth.read_text()) if truth is not None else None
-        report.write_text(build_report(data.gray, data.meta, doc, truth_doc))
+            truth_doc = json.loads(truth.read_text()) if truth is not None else None
+            report.write_text(build_report(data.gray, data.meta, doc, truth_doc))
     if as_json:
         typer.echo(json.dumps(doc))
         return

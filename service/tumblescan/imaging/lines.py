@@ -47,7 +47,7 @@ def edge_points(
     segment: FloatArray,
     *,
     half_width_px: float = 3.0,
-    step_px: float = 1.0,
+    step_px: float = 0.5,
     end_trim_px: float = 3.0,
 ) -> EdgePoints:
     """Sample intensity profiles normal to ``segment`` every ``step_px`` (bilinear, ``cv2.remap``) and

@@ -17,13 +17,17 @@ class UnknownKindError(InputError):
 @cache
 def kinds() -> dict[str, JobKind]:
     """Every kind by name (built once per process; adapters import their cores lazily)."""
+    from .kinds.bearings import Bearings
     from .kinds.linescan import LinescanMotion
+    from .kinds.marker_pose import MarkerPoseGraph
     from .kinds.panel_axis import PanelAxis
     from .kinds.spin_rate import SpinFromImages
 
     listed: list[JobKind] = [
         LinescanMotion(),
         PanelAxis(),
+        MarkerPoseGraph(),
+        Bearings(),
         SpinFromImages(),
     ]
     return {k.name: k for k in listed}

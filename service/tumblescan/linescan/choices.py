@@ -8,3 +8,4 @@ from typing import Literal
 Strategy = Literal["auto", "lm", "swarm"]
 Objective = Literal["ml", "pairwise"]
 ModelChoice = Literal["auto", "spin-precession", "spin-only"]
+ShapeName = Literal["box", "telescope", "dish-boom", "long-array", "octagon-truss"]

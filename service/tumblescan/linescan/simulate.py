@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from .._open3d import load_open3d
 from ..target.motion import Motion, apply_rotation
 from ..target.shape import SatelliteShape
+from ..target.shapes import Shape
 from .sensor import Scanner, azimuth_elevation
 from .tracks import Tracks
 
@@ -30,7 +31,7 @@ class Scene(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     scanner: Scanner = Scanner()
-    shape: SatelliteShape = SatelliteShape()
+    shape: Shape = SatelliteShape()
     frames: int = Field(15, ge=1, le=1000)
     start_s: float = Field(0.0, allow_inf_nan=False, description="time of the first line")
     body_offset_m: tuple[float, float, float] = Field(

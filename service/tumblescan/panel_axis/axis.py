@@ -97,8 +97,11 @@ class _Stack:
         return np.maximum((self.D_off @ d) ** 2 * self.v_off + (self.D_ang @ d) ** 2 * self.v_ang, 1e-30)
 
 
-def fit_direction(planes: list[PlaneObs], *, robust: bool = True, iterations: int = 10) -> DirectionFit:
-    """The common direction of the planes' lines (see the module docstring); needs 2 planes or more."""
+def fit_direction(
+    planes: list[PlaneObs], *, robust: bool = True, iterations: int = 10, reject: bool = False
+) -> DirectionFit:
+    """The common direction of the planes' lines (see the module docstring); needs 2 planes or more.
+    With ``reject``, planes over 5σ after the fit are dropped and the fit redone (kept when 3 remain)."""
     st = _Stack(planes)
     N = st.N
     d = np.linalg.svd(N)[2][-1]
@@ -118,6 +121,13 @@ def fit_direction(planes: list[PlaneObs], *, robust: bool = True, iterations: in
             break
     s2 = st.sigma2(d)
     r = N @ d / np.sqrt(s2)
+    if reject and np.count_nonzero(np.abs(r) <= REJECT_K) >= 3 and np.any(np.abs(r) > REJECT_K):
+        w = np.where(np.abs(r) > REJECT_K, 0.0, w)
+        for _ in range(iterations):
+            M = (N * (w / s2)[:, None]).T @ N
+            d = np.linalg.eigh(M)[1][:, 0]
+            s2 = st.sigma2(d)
+        r = N @ d / np.sqrt(s2)
     M = (N * (w / s2)[:, None]).T @ N
     evals, evecs = np.linalg.eigh(M)
     d = evecs[:, 0]
@@ -207,3 +217,28 @@ def fit_with_orthogonal(
     cov = cov * np.outer(norms, norms)
     res_axis = residuals(sol.x)[: len(axis_planes)]
     return DirectionFit(d, basis, cov, chi2, dof, res_axis, groups[0][1] ** 2)
+
+
+# Systematic edge errors (PSF, shading, a thin side face) that do not average out along an edge:
+# a shift of the whole edge, and a differential shift of one end against the other.
+EDGE_BIAS_PX = 0.01
+EDGE_TILT_BIAS_PX = 0.003
+
+
+def with_edge_bias(fit: DirectionFit, planes: list[PlaneObs], half_lengths_px: list[float]) -> DirectionFit:
+    """``fit`` with its covariance widened for a bias of the edge model: noise averages down along
+    an edge, a bias does not. Each line gets an independent offset bias of ``EDGE_BIAS_PX`` and an
+    angle bias of ``EDGE_TILT_BIAS_PX / half length``; their effect on the direction,
+    ``(Σ n_i n_iᵀ/b_i²)⁻¹`` in the tangent plane, is added to the noise covariance. The fit itself
+    (its weights) is unchanged."""
+    d = fit.direction
+    N = np.array([p.normal for p in planes])
+    b2 = np.array(
+        [
+            (p.dn_doffset @ d) ** 2 * EDGE_BIAS_PX**2 + (p.dn_dangle @ d) ** 2 * (EDGE_TILT_BIAS_PX / max(h, 1.0)) ** 2
+            for p, h in zip(planes, half_lengths_px, strict=True)
+        ]
+    )
+    info = fit.basis @ ((N / np.maximum(b2, 1e-30)[:, None]).T @ N) @ fit.basis.T
+    cov = fit.cov_tangent_rad2 + np.linalg.pinv(info, hermitian=True)
+    return DirectionFit(d, fit.basis, cov, fit.chi2, fit.dof, fit.residuals, fit.weights)

@@ -20,20 +20,28 @@ import numpy as np
 
 from .._typing import FloatArray, Progress, no_progress
 from ..imaging.camera import PinholeCamera
-from .axis import DirectionFit, PlaneObs, angle_between_lines_deg, fit_direction, fit_with_orthogonal
+from .axis import (
+    DirectionFit,
+    PlaneObs,
+    angle_between_lines_deg,
+    fit_direction,
+    fit_with_orthogonal,
+    with_edge_bias,
+)
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
-from .frames import R_ecef_from_enu, canonical, pitch_yaw_deg, pitch_yaw_jacobian
-from .meta import MatrixPointing, PanelAxisInput
+from .meta import PanelAxisInput
 from .options import EstimateOptions
+from .outputs import Frames
 from .paper import estimate_paper
-from .result import Axis, Candidate, Direction, Observability, Panel, PanelAxisResult, Segmentation
+from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
-from .weak import ippe_candidates, wing_corners
+from .weak import best_wing, ippe_candidates, wing_corners
 
 MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
 MIN_TIP_WIDTH_PX = 4.0  # under it the panel is seen edge-on
 MIN_AXIS_EXTENT_PX = 30.0
+MAX_CORNER_FIT_PX = 1.0  # IPPE reprojection rms over which the wing's corners are doubtful
 ELONGATION_ALIGN_DEG = 20.0
 
 
@@ -50,7 +58,7 @@ def estimate_axis(
     options = options or EstimateOptions()
     t0 = time.perf_counter()
     camera = meta.pinhole
-    frames = _Frames(meta)
+    frames = Frames(meta)
     if full_scale is None:
         full_scale = 255.0 if gray.max() <= 255 else 65535.0
     if options.method == "paper":
@@ -94,6 +102,7 @@ def estimate_axis(
     separate = fit
     if orthogonal:
         fit = fit_with_orthogonal(fit, [e.plane for e in axis_family.edges], orthogonal)
+    fit = with_edge_bias(fit, [e.plane for e in axis_family.edges], [e.line.half_length_px for e in axis_family.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
     a_img = axis_family.image_direction()
@@ -109,7 +118,7 @@ def estimate_axis(
     corners = None
     if weak:
         warnings.append("weak_perspective")
-        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options)
+        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options, warnings)
     else:
         axis = frames.axis(fit.direction, fit.cov_tangent_rad2, fit.basis)
     image_angle = float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0)
@@ -142,69 +151,6 @@ def estimate_axis(
     )
 
 
-class _Frames:
-    """Turns camera-frame directions into the input's frames (station ENU, ECEF), signed as lines."""
-
-    def __init__(self, meta: PanelAxisInput) -> None:
-        R = meta.R_cam_from_ref
-        self.R_cam_from_enu: FloatArray | None = None
-        self.R_ecef_from_enu: FloatArray | None = None
-        self.R_cam_from_ecef: FloatArray | None = None
-        if meta.station is not None:
-            self.R_ecef_from_enu = R_ecef_from_enu(meta.station.lat_deg, meta.station.lon_deg)
-        if R is None:
-            return
-        if isinstance(meta.pointing, MatrixPointing) and meta.pointing.frame == "ecef":
-            self.R_cam_from_ecef = R
-            if self.R_ecef_from_enu is not None:
-                self.R_cam_from_enu = R @ self.R_ecef_from_enu
-        else:
-            self.R_cam_from_enu = R
-            if self.R_ecef_from_enu is not None:
-                self.R_cam_from_ecef = R @ self.R_ecef_from_enu.T
-
-    def signed(self, d_cam: FloatArray) -> FloatArray:
-        """``d_cam`` signed as the line's canonical station vector (North >= 0), else camera x >= 0."""
-        d = np.asarray(d_cam, dtype=float) / np.linalg.norm(d_cam)
-        if self.R_cam_from_enu is not None:
-            return d if (self.R_cam_from_enu.T @ d)[1] >= 0 else -d
-        if self.R_cam_from_ecef is not None:
-            return d if (self.R_cam_from_ecef.T @ d)[1] >= 0 else -d
-        return canonical(d, 0)
-
-    def direction(self, d_cam: FloatArray) -> Direction:
-        d = self.signed(d_cam)
-        enu = self.R_cam_from_enu.T @ d if self.R_cam_from_enu is not None else None
-        ecef = self.R_cam_from_ecef.T @ d if self.R_cam_from_ecef is not None else None
-        return Direction(
-            camera=d.tolist(),
-            station_enu=canonical(enu, 1).tolist() if enu is not None else None,
-            ecef=canonical(ecef, 1).tolist() if ecef is not None else None,
-        )
-
-    def axis(self, d_cam: FloatArray, cov: FloatArray, basis_cam: FloatArray) -> Axis:
-        dd = self.direction(d_cam)
-        out = Axis(camera=dd.camera, station_enu=dd.station_enu, ecef=dd.ecef)
-        out.sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
-        out.cov_tangent_rad2 = np.asarray(cov).tolist()
-        out.tangent_basis_camera = np.asarray(basis_cam).tolist()
-        for name, vec, R in (("", dd.station_enu, self.R_cam_from_enu), ("_ecef", dd.ecef, self.R_cam_from_ecef)):
-            if vec is None or R is None:
-                continue
-            L = np.asarray(vec)
-            pitch, yaw = pitch_yaw_deg(L)
-            setattr(out, f"pitch{name}_deg", pitch)
-            setattr(out, f"yaw{name}_deg", yaw)
-            if name == "":
-                basis = np.asarray(basis_cam) @ R  # rows: basis vectors in ENU
-                out.tangent_basis_enu = basis.tolist()
-                J = pitch_yaw_jacobian(L, basis)
-                c = J @ cov @ J.T
-                out.sigma_pitch_deg = float(np.degrees(np.sqrt(max(c[0, 0], 0.0))))
-                out.sigma_yaw_deg = float(np.degrees(np.sqrt(max(c[1, 1], 0.0))))
-        return out
-
-
 def _axis_family(families: list[Family], target: Target, min_line_px: float) -> Family | None:
     """The family with the most edge length along the target's elongation (2+ edges, one long)."""
     best, best_score = None, 0.0
@@ -230,7 +176,8 @@ def _extent(family: Family) -> float:
 def _short_family(
     families: list[Family], axis_family: Family, d: FloatArray
 ) -> tuple[Family | None, DirectionFit | None]:
-    """The family within 10° of orthogonal to the axis with the most edge length."""
+    """The family within 10° of orthogonal to the axis with the most edge length (the wing ends
+    and sub-panel gaps, usually), fitted with edges over 5σ dropped."""
     best = None
     for fam in families:
         if fam is axis_family or len(fam.edges) < 2:
@@ -241,7 +188,7 @@ def _short_family(
             best = fam
     if best is None:
         return None, None
-    return best, fit_direction([e.plane for e in best.edges])
+    return best, fit_direction([e.plane for e in best.edges], reject=True)
 
 
 def _orthogonal_families(
@@ -302,9 +249,10 @@ def _weak_answer(
     family: Family,
     edges: list[Edge],
     camera: PinholeCamera,
-    frames: _Frames,
+    frames: Frames,
     rng: np.random.Generator,
     options: EstimateOptions,
+    warnings: list[str],
 ) -> tuple[Axis | None, list[Candidate], FloatArray | None]:
     """Weak perspective: the IPPE pair with the prior, else no axis (or a refusal)."""
     if not meta.prior_complete:
@@ -316,13 +264,21 @@ def _weak_answer(
             )
         return None, [], None
     assert meta.prior is not None and meta.prior.panel_length_m is not None and meta.prior.panel_width_m is not None
-    found = wing_corners(family, edges)
+    L, W = meta.prior.panel_length_m, meta.prior.panel_width_m
+    found = best_wing(wing_corners(family, edges), L, W, camera, meta.prior.range_m)
     if found is None:
         if options.require_axis:
-            raise DepthUnobservableError("image: weak perspective and no wing's four corners were found", field="image")
+            raise DepthUnobservableError(
+                "image: weak perspective and no wing's four corners fit the panel prior", field="image"
+            )
+        warnings.append("wing_corners_not_found")
         return None, [], None
-    corners, sigma_px = found
-    poses = ippe_candidates(corners, meta.prior.panel_length_m, meta.prior.panel_width_m, camera, sigma_px, rng)
+    corners, sigma_px, fit_px = found
+    if fit_px > MAX_CORNER_FIT_PX:
+        warnings.append("wing_corners_misfit")
+    # A rectangle that fits the corners worse than their noise says the corners are off by about
+    # that much: the Monte Carlo uses the larger of the two.
+    poses = ippe_candidates(corners, L, W, camera, max(sigma_px, fit_px), rng)
     if not poses:
         return None, [], corners
     cands = []
@@ -348,7 +304,7 @@ def _panel(
     family: Family,
     short_family: Family | None,
     short_fit: DirectionFit | None,
-    frames: _Frames,
+    frames: Frames,
     corners: FloatArray | None,
 ) -> Panel:
     rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
@@ -362,22 +318,25 @@ def _panel(
         panel.short_axis = frames.direction(short_fit.direction)
         panel.normal = frames.direction(np.cross(fit.direction, short_fit.direction))
         panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short_fit.direction))
+        # σ of d·d_short from both fits' covariances (the angle moves by that much in radians).
+        g1, g2 = fit.basis @ short_fit.direction, short_fit.basis @ fit.direction
+        var = float(g1 @ fit.cov_tangent_rad2 @ g1 + g2 @ short_fit.cov_tangent_rad2 @ g2)
+        panel.orthogonality_sigma_deg = float(np.degrees(np.sqrt(max(var, 0.0))))
         panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
         panel.short_edges = len(short_family.edges)
     return panel
 
 
 def _paper_result(
-    gray: FloatArray, camera: PinholeCamera, frames: _Frames, options: EstimateOptions, t0: float
+    gray: FloatArray, camera: PinholeCamera, frames: Frames, options: EstimateOptions, t0: float
 ) -> PanelAxisResult:
+    """The paper's pipeline as a result: the axis without σ, its two edges, L″ when found."""
     pf = estimate_paper(gray, camera, options.min_line_px)
     axis = frames.axis(pf.axis_cam, np.zeros((2, 2)), np.zeros((2, 3)))
     axis.sigma_deg = axis.sigma_pitch_deg = axis.sigma_yaw_deg = None
     axis.cov_tangent_rad2 = axis.tangent_basis_enu = axis.tangent_basis_camera = None
-    uv = camera.project(np.atleast_2d(pf.axis_cam * np.sign(pf.axis_cam[2] or 1.0)))  # direction of the image line
-    seg = pf.edges_px[0]
+    seg = pf.edges_px[0]  # the longest edge gives the in-image angle
     a_img = (seg[2:] - seg[:2]) / np.linalg.norm(seg[2:] - seg[:2])
-    del uv
     mid = (pf.edges_px[:, :2] + pf.edges_px[:, 2:]).mean(axis=0) / 2
     n2 = np.array([-a_img[1], a_img[0]])
     panel = Panel(edges_px=pf.edges_px.tolist(), long_edges=2)

@@ -1,5 +1,6 @@
 """The paper's pipeline as written (Song et al. 2020, §2): Otsu mask, LSD on the binary mask, the
-two longest (nearly parallel, distinct) edges, and the intersection of their planes ``n_1 × n_2``.
+two longest (nearly parallel, distinct) edges along the mask's elongation (our reading of its
+"length, slope and end-point constraints"), and the intersection of their planes ``n_1 × n_2``.
 No σ. The short centre line L″ comes the same way from the two longest edges across the axis."""
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from .segment import MIN_TARGET_PX, to_8bit
 
 PARALLEL_DEG = 10.0
 DISTINCT_PX = 3.0
+SLOPE_DEG = 20.0
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,15 @@ def estimate_paper(gray: FloatArray, camera: PinholeCamera, min_line_px: float) 
     if len(seg) < 2:
         raise TooFewEdgesError(f"image: {len(seg)} edges of {min_line_px:.0f} px or more on the mask", field="image")
     seg = seg[np.argsort(-np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]))]
+    # The paper's "slope constraint" (its rules are not given): long edges run along the target's
+    # principal elongation.
+    vs, us = np.nonzero(mask)
+    q = np.column_stack([us, vs]).astype(float)
+    q -= q.mean(axis=0)
+    principal = np.linalg.eigh(q.T @ q)[1][:, 1]
+    along = seg[[_angle(s, np.array([0.0, 0.0, *principal])) < SLOPE_DEG for s in seg]]
+    if len(along) >= 2:
+        seg = np.vstack([along, seg[[_angle(s, np.array([0.0, 0.0, *principal])) >= SLOPE_DEG for s in seg]]])
     pair = _pair(seg, seg[0], parallel=True)
     if pair is None:
         raise TooFewEdgesError("image: no second long edge parallel to the longest", field="image")

@@ -34,44 +34,67 @@ class PoseCandidate:
     basis: FloatArray
 
 
-def wing_corners(family: Family, edges: list[Edge]) -> tuple[FloatArray, float] | None:
-    """The 4 corners (4, 2) of the best-seen wing, ordered rail A start/end, rail B end/start
-    (along the axis family's image direction), and their σ (px); None when no wing is found."""
+def wing_corners(family: Family, edges: list[Edge]) -> list[tuple[FloatArray, float]]:
+    """Candidate corner sets (4, 2) of a wing, each ordered rail A start/end, rail B end/start
+    (along the axis family's image direction), with their σ (px), most likely first: the longest
+    rails (a wing's long edges) and their longest covered intervals first."""
     a = family.image_direction()
     b = np.array([-a[1], a[0]])
     rails = _rails(family.edges, b)
-    if len(rails) < 2:
-        return None
     rails.sort(key=lambda r: -sum(e.length_px for e in r))
-    rail_a = rails[0]
-    off_a = _offset(rail_a, b)
-    others = [r for r in rails[1:] if abs(_offset(r, b) - off_a) > 3.0]
-    if not others:
-        return None
-    rail_b = others[0]
     span = _span(family.edges, a)
     tol = 0.03 * span
-    ia = max(_merged(rail_a, a, tol), key=lambda iv: iv[1] - iv[0])
-    best, best_overlap = None, 0.0
-    for iv in _merged(rail_b, a, tol):
-        overlap = min(iv[1], ia[1]) - max(iv[0], ia[0])
-        if overlap > best_overlap:
-            best, best_overlap = iv, overlap
-    if best is None or best_overlap < 0.5 * min(ia[1] - ia[0], best[1] - best[0]):
-        return None
     members = {id(e) for e in family.edges}
     cross = [e for e in edges if id(e) not in members and _angle_diff(e, a) > np.radians(20)]
-    line_a, line_b = _rail_line(rail_a), _rail_line(rail_b)
-    corners = np.array(
-        [
-            _corner(line_a, ia[0], a, cross),
-            _corner(line_a, ia[1], a, cross),
-            _corner(line_b, best[1], a, cross),
-            _corner(line_b, best[0], a, cross),
-        ]
-    )
-    sig = [e.line.sigma_px for e in rail_a + rail_b]
-    return corners, max(0.3, 2.0 * float(np.median(sig)))
+    out = []
+    for ka, rail_a in enumerate(rails[:3]):
+        off_a = _offset(rail_a, b)
+        for rail_b in rails[ka + 1 : 4]:
+            if abs(_offset(rail_b, b) - off_a) <= 3.0:
+                continue
+            line_a, line_b = _rail_line(rail_a), _rail_line(rail_b)
+            sig = [e.line.sigma_px for e in rail_a + rail_b]
+            sigma = max(0.3, 2.0 * float(np.median(sig)))
+            for ia in sorted(_merged(rail_a, a, tol), key=lambda iv: iv[0] - iv[1]):
+                for ib in sorted(_merged(rail_b, a, tol), key=lambda iv: iv[0] - iv[1]):
+                    overlap = min(ib[1], ia[1]) - max(ib[0], ia[0])
+                    if overlap < 0.5 * min(ia[1] - ia[0], ib[1] - ib[0]) or min(ia[1] - ia[0], ib[1] - ib[0]) < 10:
+                        continue
+                    corners = np.array(
+                        [
+                            _corner(line_a, ia[0], a, cross),
+                            _corner(line_a, ia[1], a, cross),
+                            _corner(line_b, ib[1], a, cross),
+                            _corner(line_b, ib[0], a, cross),
+                        ]
+                    )
+                    out.append((corners, sigma))
+    return out
+
+
+def best_wing(
+    sets: list[tuple[FloatArray, float]],
+    length_m: float,
+    width_m: float,
+    camera: PinholeCamera,
+    range_m: float | None = None,
+) -> tuple[FloatArray, float, float] | None:
+    """The first corner set (in the given order) that an L x W rectangle fits within 1 px rms and,
+    with a range prior, at a depth within 10 % of it; else the best-fitting one. Returns
+    (corners, σ, reprojection rms px). Four points of a parallelogram fit a rectangle of the wrong
+    length by tilting it, so the fit alone cannot rank the sets: the order does."""
+    best = None
+    for corners, sigma in sets:
+        sols = _solve(corners, length_m, width_m, camera)
+        if not sols:
+            continue
+        cost = min(c for _, _, c, _ in sols)
+        depth_ok = range_m is None or all(abs(z / range_m - 1) < 0.1 for _, _, _, z in sols)
+        if cost <= 1.0 and depth_ok:
+            return corners, sigma, cost
+        if depth_ok and (best is None or cost < best[2]):
+            best = (corners, sigma, cost)
+    return best
 
 
 def ippe_candidates(
@@ -82,19 +105,20 @@ def ippe_candidates(
     sigma_px: float,
     rng: np.random.Generator,
 ) -> list[PoseCandidate]:
-    """Both IPPE poses of the wing rectangle (length along model x), best first."""
+    """Both IPPE poses of the wing rectangle (length along model x), best first. Their covariance
+    comes from redoing IPPE on corners perturbed by ``sigma_px`` (Monte Carlo)."""
     base = _solve(corners_px, length_m, width_m, camera)
     if not base:
         return []
     samples: list[list[FloatArray]] = [[] for _ in base]
     for _ in range(MONTE_CARLO):
         noisy = _solve(corners_px + rng.normal(0, sigma_px, corners_px.shape), length_m, width_m, camera)
-        for k, (ax, _, _) in enumerate(base):
+        for k, (ax, *_) in enumerate(base):
             if noisy:
                 near = max(noisy, key=lambda s: abs(float(s[0] @ ax)))
                 samples[k].append(near[0] * np.sign(near[0] @ ax))
     out = []
-    for k, (ax, nrm, cost) in enumerate(base):
+    for k, (ax, nrm, cost, _) in enumerate(base):
         basis = _basis(ax)
         dev = np.array([basis @ (s - ax) for s in samples[k]]) if samples[k] else np.zeros((0, 2))
         cov = np.cov(dev.T) if len(dev) > 2 else np.eye(2)
@@ -104,12 +128,13 @@ def ippe_candidates(
 
 def _solve(
     corners: FloatArray, L: float, W: float, camera: PinholeCamera
-) -> list[tuple[FloatArray, FloatArray, float]]:
+) -> list[tuple[FloatArray, FloatArray, float, float]]:
+    """IPPE's poses: (axis, normal, reprojection rms px, depth m) each."""
     import cv2
 
     obj = np.array([[0, 0, 0], [L, 0, 0], [L, W, 0], [0, W, 0]], dtype=np.float64)
     try:
-        n, rvecs, _, errs = cv2.solvePnPGeneric(
+        n, rvecs, tvecs, errs = cv2.solvePnPGeneric(
             obj, np.ascontiguousarray(corners, dtype=np.float64), camera.K, None, flags=cv2.SOLVEPNP_IPPE
         )
     except cv2.error:
@@ -118,7 +143,8 @@ def _solve(
     for k in range(n):
         R, _ = cv2.Rodrigues(rvecs[k])
         cost = float(np.ravel(errs)[k]) if errs is not None else 0.0
-        out.append((np.asarray(R[:, 0], dtype=float), np.asarray(R[:, 2], dtype=float), cost))
+        depth = float(np.ravel(tvecs[k])[2])
+        out.append((np.asarray(R[:, 0], dtype=float), np.asarray(R[:, 2], dtype=float), cost, depth))
     return out
 
 

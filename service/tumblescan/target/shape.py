@@ -6,7 +6,7 @@ bus's 8 corners and each panel's 4 corners on its sun-facing side (16 in all).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +23,7 @@ class SatelliteShape(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    kind: Literal["box"] = "box"
     bus_m: tuple[float, float, float] = (3.2, 3.0, 4.4)
     panel_length_m: float = Field(5.6, gt=0)
     panel_width_m: float = Field(4.8, gt=0)

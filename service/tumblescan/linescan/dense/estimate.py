@@ -140,28 +140,23 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
     setup = _Setup(data, reg, mid, voxel, extent, opts, noise, progress)
-    main, warnings = _best_attempt(setup, global_pairs)
+    best, warnings, attempts = _best_attempt(setup, global_pairs, n2)
     if data.spurious:
         warnings.append(
             f"{data.spurious} points ({100 * data.spurious / len(cloud):.1f} %) were left out of the fit as spurious "
             "returns (ranges far from the rest of their patch); they are rectified with the others"
         )
-    still_poor = _poor_fit(main.fit)
+    main, fit, check = best.solve, best.fit, best.check
+    still_poor = _poor_fit(fit)
     if still_poor is not None:
         warnings.append(f"no motion found fits the frames ({still_poor}): the estimate is unreliable")
-    fit = main.fit
-    # 4. Model choice.
-    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
-        progress("refining", 0.66)
-        fit = refine_dense(
-            data, main.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+    unmatched = np.flatnonzero(~np.isfinite(fit.frame_rms_m))
+    if len(unmatched):
+        warnings.append(
+            f"frame(s) {', '.join(map(str, unmatched))} had no surface matched in another frame (an edge-on or "
+            "featureless view): they constrain nothing and were left out of the fit and the check"
         )
-    # 5. Validate: do the first n2 frames alone support the motion?
-    check: Similarity | None = None
-    if n2 < n_frames:
-        progress("validating", 0.7)
-        check = _validate(setup, n2, fit)
-    else:
+    if n2 >= n_frames:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:
         warnings.append(
@@ -169,44 +164,93 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
             f"{check.distance:.3g} (threshold {check.threshold:.3g}); treat the estimate with caution"
         )
     progress("estimated", 1.0)
-    return _result(frames, fit, main, check, n2, T, warnings, time.perf_counter() - started)
+    return _result(frames, fit, main, check, n2, T, warnings, attempts, time.perf_counter() - started)
 
 
-def _best_attempt(setup: _Setup, global_pairs: PairTransforms) -> tuple[_Solve, list[str]]:
-    """The vote on rotation angles, then, if its motion fits poorly, the consensus over triplets
-    of pairs, then the swarm on the dense cost: the best fit (smallest residual scale) and its
-    warnings."""
+@dataclass(frozen=True)
+class _Attempt:
+    """One start carried through: its solve, the fit after the model choice, the check on the
+    first frames, and its warnings."""
+
+    solve: _Solve
+    fit: DenseFit
+    check: Similarity | None
+    warnings: list[str]
+
+    def problem(self) -> str | None:
+        """Why another start should be tried, or None when this one is sound. A frame without a
+        match (an edge-on view) is noted, not a reason: it says nothing against the motion."""
+        poor = _poor_fit(self.fit)
+        if poor is not None:
+            return poor
+        if self.check is not None and not self.check.passed:
+            return "the two-frame-count check failed"
+        return None
+
+    def flaws(self) -> tuple[bool, bool, int, float]:
+        """Order of preference: a fit that is not poor, a check that passed, fewer unmatched
+        frames, smaller residuals."""
+        failed = self.check is not None and not self.check.passed
+        unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
+        return (_poor_fit(self.fit) is not None, failed, unmatched, self.fit.scale)
+
+
+def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple[_Attempt, list[str], int]:
+    """The vote on rotation angles, then, if its motion fits poorly or fails the check, the
+    consensus over triplets of pairs, then the swarm on the dense cost: the first sound attempt,
+    or the least flawed one, its warnings and how many starts were made."""
     mid, seed = setup.mid, setup.opts.seed
-    attempts = (
+    starts = (
         (lambda: vote(global_pairs, mid), "registration+cone+dense"),
         (lambda: consensus_start(global_pairs, mid, seed), "registration+consensus+dense"),
         (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
-    main: _Solve | None = None
-    kept: list[str] = []
+    best: _Attempt | None = None
     tried: list[str] = []
-    for begin, path in attempts:
+    made = 0
+    for begin, path in starts:
+        made += 1
         if tried:
             setup.progress("initializing", 0.05)
         attempt_warnings: list[str] = []
         try:
-            alt = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
+            solve = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
         except NoSurfacesError:
             raise
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
-        if main is None or alt.fit.scale < main.fit.scale:
-            main, kept = alt, attempt_warnings
-        poor = _poor_fit(alt.fit)
-        if poor is None:
+        attempt = _judged(setup, solve, n2, attempt_warnings)
+        if best is None or attempt.flaws() < best.flaws():
+            best = attempt
+        problem = attempt.problem()
+        if problem is None:
             break
-        tried.append(f"{path}: {poor}")
-    if main is None:
+        tried.append(f"{path}: {problem}")
+    if best is None:
         raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
-    if tried and main.path != attempts[0][1]:
-        kept = [*kept, "the first start failed (" + "; ".join(tried) + f"); the motion comes from {main.path}"]
-    return main, kept
+    kept = list(best.warnings)
+    if tried:
+        outcome = "no start was sound" if best.problem() else "the motion comes from " + best.solve.path
+        kept.append(f"{len(tried)} start(s) tried before ({'; '.join(tried)}); {outcome}")
+    return best, kept, made
+
+
+def _judged(setup: _Setup, solve: _Solve, n2: int, warnings: list[str]) -> _Attempt:
+    """The model choice and the two-frame-count check on one solve."""
+    fit, opts = solve.fit, setup.opts
+    # 4. Model choice.
+    if opts.model == "auto" and _precession_insignificant(fit, opts, warnings):
+        setup.progress("refining", 0.66)
+        fit = refine_dense(
+            setup.data, solve.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+        )
+    # 5. Validate: do the first n2 frames alone support the motion?
+    check = None
+    if n2 < setup.data.n_frames:
+        setup.progress("validating", 0.7)
+        check = _validate(setup, n2, fit)
+    return _Attempt(solve, fit, check, warnings)
 
 
 def _never_backwards(progress: Progress) -> Progress:
@@ -286,13 +330,9 @@ def _solve(setup: _Setup, pairs: PairTransforms, start: Start, warnings: list[st
 
 
 def _poor_fit(fit: DenseFit) -> str | None:
-    """Why the refined motion cannot be right, or None: residuals many times their model sigma,
-    or frames left without a single match."""
+    """Why the refined motion cannot be right, or None: residuals many times their model sigma."""
     if not fit.scale <= POOR_SCALE:
         return f"residuals {fit.scale:.1f} times their expected size"
-    unmatched = int(np.sum(~np.isfinite(fit.frame_rms_m)))
-    if unmatched:
-        return f"{unmatched} of {len(fit.frame_rms_m)} frames without a match"
     return None
 
 
@@ -355,6 +395,7 @@ def _result(
     n2: int,
     T: float,
     warnings: list[str],
+    attempts: int,
     elapsed_s: float,
 ) -> MotionResult:
     x = fit.x
@@ -379,7 +420,7 @@ def _result(
             "solver": {
                 "path": f"{main.path} ({main.pairs_used} frame pairs)",
                 "iterations": fit.iterations,
-                "attempts": 1,
+                "attempts": attempts,
                 "elapsed_s": elapsed_s,
             },
             "warnings": warnings,

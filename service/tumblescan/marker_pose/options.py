@@ -1,0 +1,52 @@
+"""Options and limits of marker-pose-graph (small pydantic models; unknown keys are refused)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class MarkerPoseOptions(BaseModel):
+    """How to estimate. Level A (marker coordinates) uses all of these; levels B and C (tag corners,
+    images) will add their own fields beside them."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    method: Literal["graph", "paper"] = Field(
+        "graph",
+        description="graph: per-frame identification and Kabsch, refined by a GTSAM pose graph (ours); "
+        "paper: vector-cross poses chained frame to frame, then a pose graph (the paper's method, for benchmarks)",
+    )
+    body_frame: Literal["layout", "launch"] | None = Field(
+        None, description="frame of the reported body poses; default: the given layout's, else the launch frame"
+    )
+    motion_prior: Literal["none", "constant_velocity"] = Field(
+        "none", description="constant_velocity: white-noise-acceleration prior between frames (smooths, bridges gaps)"
+    )
+    angular_accel_psd: float | None = Field(
+        None, gt=0, description="PSD of the white angular acceleration [rad^2/s^3]; default: from the data"
+    )
+    accel_psd: float | None = Field(
+        None, gt=0, description="PSD of the white linear acceleration [m^2/s^3]; default: from the data"
+    )
+    robust: Literal["none", "huber", "cauchy"] = Field("none", description="robust kernel on the graph's factors")
+    robust_k: float = Field(3.0, gt=0, le=100, description="kernel width in sigmas")
+    outlier_sigma: float = Field(5.0, ge=3.0, le=50.0, description="per-marker residual gate [sigmas]")
+    max_bridge_frames: int = Field(10, ge=0, le=10_000, description="longest gap the motion prior bridges [frames]")
+    point_sigma_m: float | None = Field(
+        None, description="1-sigma marker error per axis [m]; overrides the document's sensor.point_sigma_m"
+    )
+    marginals: bool = Field(True, description="compute each pose's covariance from the graph")
+
+
+class MarkerPoseLimits(BaseModel):
+    """Input sizes a deployment accepts."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    max_observations: int = Field(2_000_000, ge=1)
+    max_frames: int = Field(200_000, ge=1)
+    max_tracks: int = Field(200_000, ge=1)
+    max_layout_markers: int = Field(256, ge=3)
+    max_range_m: float = Field(100.0, gt=0, description="points farther from the world origin are refused")

@@ -1,0 +1,102 @@
+"""marker-pose-graph through a real service: a JSON job and an upload succeed with the estimate
+near the truth; bad input is a 422 naming the field; the report is served."""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from tumblescan.marker_pose.evaluate import evaluate
+from tumblescan.marker_pose.result import MarkerPoseResult
+from tumblescan.marker_pose.simulate import SimConfig, simulate
+
+from ..live import serve, wait_job
+
+KIND = "marker-pose-graph"
+
+
+@pytest.fixture(scope="module")
+def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
+    with serve(tmp_path_factory.mktemp("marker-pose") / "data") as url, httpx.Client(base_url=url, timeout=30) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def sim_doc() -> tuple[dict[str, Any], dict[str, Any]]:
+    sim = simulate(SimConfig(frames=120), 7)
+    return sim.document(), sim.truth()
+
+
+def test_kind_is_published(http: httpx.Client) -> None:
+    kind = http.get(f"/v1/kinds/{KIND}").json()
+    assert [f["name"] for f in kind["forms"]] == ["markers"]
+    assert "motion_prior" in kind["forms"][0]["options_schema"]["properties"]
+
+
+def test_json_job_succeeds_near_the_truth(http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]) -> None:
+    doc, truth = sim_doc
+    job = http.post("/v1/jobs", json={"kind": KIND, "input": doc}).json()
+    done = wait_job(http, job["id"])
+    assert done["status"] == "succeeded", done
+    result = http.get(f"/v1/jobs/{job['id']}").json()["result"]
+    assert result["kind"] == KIND
+    assert evaluate(MarkerPoseResult.model_validate(result), truth)["coverage"] >= 0.98
+    frames = {f["frame"]: f for f in truth["frames"]}
+    errors = [
+        np.linalg.norm(np.array(p["T_world_body"]["t_m"]) - np.array(frames[p["frame"]]["t_m"]))
+        for p in result["poses"]
+        if p["status"] == "measured"
+    ]
+    assert np.median(errors) < 0.005  # a few millimetres with 2.9 mm markers
+    report = http.get(f"/v1/jobs/{job['id']}/report")
+    assert report.status_code == 200 and report.text.startswith("<!DOCTYPE html>")
+
+
+def test_upload_with_separate_layout_succeeds(
+    http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]
+) -> None:
+    doc, _ = sim_doc
+    doc = copy.deepcopy(doc)
+    layout = doc.pop("body")
+    files = {"markers": ("m.json", json.dumps(doc).encode()), "layout": ("l.json", json.dumps(layout).encode())}
+    job = http.post("/v1/jobs/upload", data={"kind": KIND}, files=files).json()
+    done = wait_job(http, job["id"])
+    assert done["status"] == "succeeded", done
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "code", "field"),
+    [
+        (["units", "length"], "mm", "unsupported_units", "units.length"),
+        (["sensor", "point_sigma_m"], 0.0, "noise_out_of_range", "sensor.point_sigma_m"),
+        (["body", "markers", 1, "id"], "M1", "duplicate_marker_id", "body.markers[1].id"),
+    ],
+)
+def test_bad_input_is_422_naming_the_field(
+    http: httpx.Client,
+    sim_doc: tuple[dict[str, Any], dict[str, Any]],
+    path: list[Any],
+    value: Any,
+    code: str,
+    field: str,
+) -> None:
+    doc = copy.deepcopy(sim_doc[0])
+    target = doc
+    for p in path[:-1]:
+        target = target[p]
+    target[path[-1]] = value
+    r = http.post("/v1/jobs", json={"kind": KIND, "input": doc})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["code"] == code and detail["field"] == field
+
+
+def test_unknown_option_is_422(http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]) -> None:
+    r = http.post("/v1/jobs", json={"kind": KIND, "input": sim_doc[0], "options": {"smoothing": 3}})
+    assert r.status_code == 422 and "options.smoothing" in r.json()["detail"]["message"]
