@@ -24,7 +24,8 @@ import httpx
 
 @dataclass(frozen=True)
 class Job:
-    """One job of a kind: the upload parts (field -> file made by the kind's simulate) and options."""
+    """One job of a kind: the upload parts (field -> file made by the kind's simulate, or a glob
+    of files) and options."""
 
     label: str
     parts: dict[str, str]
@@ -57,6 +58,10 @@ RECIPES: dict[str, Recipe] = {
     "marker-pose-graph": Recipe(
         simulate="tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 200",
         jobs=[Job("level A markers", {"markers": "markers.json"})],
+    ),
+    "spin-from-images": Recipe(
+        simulate="tumblescan spin-from-images simulate --out {out} --seed 3 --width-px 256 --frames 12",
+        jobs=[Job("image sequence", {"meta": "meta.json", "frames": "frames/*.png"})],
     ),
     "bearings": Recipe(
         simulate="tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",
@@ -128,12 +133,13 @@ def registered_kinds(http: httpx.Client) -> list[str]:
 def run_job(http: httpx.Client, kind: str, job: Job, data: Path, timeout_s: float) -> tuple[str, float]:
     """Upload, wait, fetch every artifact; the final status (or why it failed) and seconds taken."""
     t0 = time.monotonic()
-    handles = {name: (data / file).open("rb") for name, file in job.parts.items()}
+    # A part names one file, or a glob for a part that takes several (an image sequence).
+    handles = [(name, path.open("rb")) for name, pattern in job.parts.items() for path in sorted(data.glob(pattern))]
     try:
-        files = [(name, (Path(fh.name).name, fh)) for name, fh in handles.items()]
+        files = [(name, (Path(fh.name).name, fh)) for name, fh in handles]
         r = http.post("/v1/jobs/upload", data={"kind": kind, "options": json.dumps(job.options)}, files=files)
     finally:
-        for fh in handles.values():
+        for _, fh in handles:
             fh.close()
     if r.status_code != 202:
         print(f"FAIL: {kind} {job.label}: upload answered {r.status_code}: {r.text[:500]}", file=sys.stderr)
