@@ -48,7 +48,7 @@ def evaluate(d: Path, method: str) -> dict[str, Any]:
                            "revs": truth["revolutions"]}  # fmt: skip
     t0 = time.perf_counter()
     try:
-        res = run(load_input(d / "meta.json"), EstimateOptions(method=method)).spin  # type: ignore[arg-type]
+        res = run(load_input(d / "meta.json"), EstimateOptions(method=method)).spin
     except InputError as exc:
         row.update(error=exc.code, seconds=time.perf_counter() - t0)
         return row

@@ -12,7 +12,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tumblescan_client import result_model
+from tumblescan_client.results import SpinResult, result_model
 
 from ..live import serve, wait_job
 
@@ -42,7 +42,8 @@ def test_upload_runs_to_a_result_near_the_truth(http: httpx.Client, los_seq: Pat
     assert r.status_code in (200, 201, 202), r.text
     done = wait_job(http, r.json()["id"], timeout_s=120)
     assert done["status"] == "succeeded", done
-    result = result_model("spin-from-images").model_validate(done["result"])
+    assert result_model("spin-from-images") is SpinResult
+    result = SpinResult.model_validate(done["result"])
     truth = json.loads((los_seq / "truth.json").read_text())
     assert abs(result.spin.rate_deg_s - truth["rate_deg_s"]) <= 4 * result.spin.sigma_rate_deg_s + 0.002
     strip = http.get(f"/v1/jobs/{done['id']}/artifacts/strip")
