@@ -6,7 +6,6 @@ fault, e.g. ``camera.fx_px`` or ``pointing.R_cam_from_ref``.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any, Literal
@@ -18,6 +17,7 @@ from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
 from ..imaging.image_io import MAX_PIXELS, MIN_SIDE_PX
+from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
 
 INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
@@ -108,18 +108,7 @@ class PanelAxisInput(BaseModel):
 
 def parse_meta(data: bytes | str, field: str = "meta") -> PanelAxisInput:
     """Validate meta.json text; ``InputError`` naming the field otherwise."""
-    try:
-        raw = json.loads(data)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
-    bad = _non_finite(raw)
-    if bad is not None:
-        raise InputError(f"{bad}: not a finite number (NaN and Infinity are refused)", field=bad)
-    if not isinstance(raw, dict):
-        raise InputError(f"{field}: a JSON object is expected", field=field)
-    schema = raw.get("schema")
-    if schema != INPUT_SCHEMA:
-        raise InputError(f"schema: {schema!r} is not {INPUT_SCHEMA!r}", field="schema")
+    raw = manifest_object(data, INPUT_SCHEMA, field=field)
     if isinstance(raw.get("pointing"), dict):  # pick the pointing form by its keys, for clear messages
         raw["pointing"] = _pointing(raw["pointing"])
     try:
@@ -135,21 +124,7 @@ def parse_meta(data: bytes | str, field: str = "meta") -> PanelAxisInput:
 
 def read_meta(path: Path) -> PanelAxisInput:
     """Read and validate meta.json from ``path``."""
-    if not path.is_file():
-        raise InputError(f"meta: no such file {path}", field="meta")
-    return parse_meta(path.read_bytes())
-
-
-def _non_finite(value: Any, path: str = "") -> str | None:
-    """The dotted path of the first NaN/Infinity in a parsed JSON value, or None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return path or "meta"
-    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
-    for key, sub in items:
-        found = _non_finite(sub, f"{path}.{key}" if path else str(key))
-        if found is not None:
-            return found
-    return None
+    return parse_meta(read_manifest(path))
 
 
 def _pointing(p: dict[str, Any]) -> AnglePointing | MatrixPointing:

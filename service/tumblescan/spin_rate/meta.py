@@ -6,15 +6,14 @@ fault, e.g. ``frames.3.t_s`` or ``camera.fx_px``.
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..io.manifest import manifest_object, read_manifest
 
 INPUT_SCHEMA = "tumblescan.spin_from_images.input/1"
 MIN_FRAMES = 6
@@ -83,18 +82,7 @@ class SpinInput(BaseModel):
 
 def parse_meta(data: bytes | str, field: str = "meta") -> SpinInput:
     """Validate meta.json text; ``InputError`` naming the field otherwise."""
-    try:
-        raw = json.loads(data)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
-    if not isinstance(raw, dict):
-        raise InputError(f"{field}: a JSON object is expected", field=field)
-    schema = raw.get("schema")
-    if schema != INPUT_SCHEMA:
-        raise InputError(f"schema: {schema!r} is not {INPUT_SCHEMA!r}", field="schema")
-    bad = _non_finite(raw)
-    if bad is not None:
-        raise InputError(f"{bad}: not a finite number (NaN and Infinity are refused)", field=bad)
+    raw = manifest_object(data, INPUT_SCHEMA, field=field)
     try:
         meta = SpinInput.model_validate(raw)
     except ValidationError as exc:
@@ -107,21 +95,7 @@ def parse_meta(data: bytes | str, field: str = "meta") -> SpinInput:
 
 def read_meta(path: Path) -> SpinInput:
     """Read and validate meta.json from ``path``."""
-    if not path.is_file():
-        raise InputError(f"meta: no such file {path}", field="meta")
-    return parse_meta(path.read_bytes())
-
-
-def _non_finite(value: Any, path: str = "") -> str | None:
-    """The dotted path of the first NaN/Infinity in a parsed JSON value, or None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return path or "meta"
-    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
-    for key, sub in items:
-        found = _non_finite(sub, f"{path}.{key}" if path else str(key))
-        if found is not None:
-            return found
-    return None
+    return parse_meta(read_manifest(path))
 
 
 def _check(meta: SpinInput) -> None:
