@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
 from ..imaging.image_io import MAX_PIXELS, MIN_SIDE_PX
 from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
@@ -24,18 +25,9 @@ INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-class CameraMeta(BaseModel):
-    model_config = _STRICT
-
-    model: Literal["pinhole"] = "pinhole"
+class CameraMeta(SharedCameraMeta):
     width_px: int = Field(ge=MIN_SIDE_PX)
     height_px: int = Field(ge=MIN_SIDE_PX)
-    fx_px: float = Field(gt=0)
-    fy_px: float = Field(gt=0)
-    cx_px: float
-    cy_px: float
-    skew: float = 0.0
-    distortion: list[float] | None = None
 
 
 class AnglePointing(BaseModel):
@@ -86,9 +78,7 @@ class PanelAxisInput(BaseModel):
 
     @property
     def pinhole(self) -> PinholeCamera:
-        c = self.camera
-        dist = tuple(c.distortion) if c.distortion is not None else None
-        return PinholeCamera(c.width_px, c.height_px, c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.skew, dist)  # type: ignore[arg-type]
+        return self.camera.pinhole()
 
     @property
     def R_cam_from_ref(self) -> FloatArray | None:

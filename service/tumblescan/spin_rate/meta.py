@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
 from ..io.manifest import manifest_object, read_manifest
 
 INPUT_SCHEMA = "tumblescan.spin_from_images.input/1"
@@ -29,18 +30,9 @@ class FrameMeta(BaseModel):
     t_s: float
 
 
-class CameraMeta(BaseModel):
-    model_config = _STRICT
-
-    model: Literal["pinhole"] = "pinhole"
+class CameraMeta(SharedCameraMeta):
     width_px: int = Field(ge=MIN_SIDE_PX)
     height_px: int = Field(ge=MIN_SIDE_PX)
-    fx_px: float = Field(gt=0)
-    fy_px: float = Field(gt=0)
-    cx_px: float
-    cy_px: float
-    skew: float = 0.0
-    distortion: list[float] | None = None
     pixel_origin: Literal["center_of_top_left_pixel"] = "center_of_top_left_pixel"
 
 
@@ -75,9 +67,7 @@ class SpinInput(BaseModel):
 
     @property
     def pinhole(self) -> PinholeCamera:
-        c = self.camera
-        dist = tuple(c.distortion) if c.distortion is not None else None
-        return PinholeCamera(c.width_px, c.height_px, c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.skew, dist)  # type: ignore[arg-type]
+        return self.camera.pinhole()
 
 
 def parse_meta(data: bytes | str, field: str = "meta") -> SpinInput:

@@ -1,0 +1,38 @@
+"""The ``camera`` block of an optical kind's meta.json, validated at the door, and the
+:class:`PinholeCamera` it describes. Each kind subclasses it to set its own smallest image
+side (``width_px`` and ``height_px`` are redeclared there with the bound)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from .camera import PinholeCamera
+
+
+class CameraMeta(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    model: Literal["pinhole"] = "pinhole"
+    width_px: int = Field(ge=1)
+    height_px: int = Field(ge=1)
+    fx_px: float = Field(gt=0)
+    fy_px: float = Field(gt=0)
+    cx_px: float
+    cy_px: float
+    skew: float = 0.0
+    distortion: list[float] | None = None
+
+    def pinhole(self) -> PinholeCamera:
+        dist = tuple(self.distortion) if self.distortion is not None else None
+        return PinholeCamera(
+            self.width_px,
+            self.height_px,
+            self.fx_px,
+            self.fy_px,
+            self.cx_px,
+            self.cy_px,
+            self.skew,
+            dist,  # type: ignore[arg-type]
+        )
