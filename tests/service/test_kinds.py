@@ -156,6 +156,11 @@ def test_every_kind_refuses_garbage_in_every_part_with_a_422(http: httpx.Client)
             if form["json_input"]:
                 r = http.post("/v1/jobs", json={"kind": kind["name"], "input": {"nonsense": [1, 2, 3]}})
                 assert r.status_code == 422 and r.json()["detail"]["field"], r.text
+        if not any(form["json_input"] for form in kind["forms"]):
+            r = http.post("/v1/jobs", json={"kind": kind["name"], "input": {"nonsense": [1, 2, 3]}})
+            detail = r.json()["detail"]
+            assert r.status_code == 422 and detail["field"] == "input", r.text
+            assert "takes its input as an upload" in detail["message"], r.text
 
 
 def test_tracks_the_forced_closed_form_cannot_start_fail_with_a_code(http: httpx.Client) -> None:

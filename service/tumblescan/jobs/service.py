@@ -10,7 +10,7 @@ from typing import Any, BinaryIO
 
 from pydantic import BaseModel, ValidationError
 
-from ..errors import MalformedInputError
+from ..errors import InputError, MalformedInputError
 from .kind import FinishedJob, InputForm, JobKind, Submission
 from .registry import get_kind
 from .runtime import Runtime
@@ -48,11 +48,13 @@ class JobService:
 
     def submit_json(self, kind_name: str, payload: Any, options: dict[str, Any], owner: str | None) -> Job:
         kind = get_kind(kind_name)
-        form = kind.form_of({}, payload)
-        if not form.json_input:
-            raise MalformedInputError(
-                f"{kind_name} takes its input as an upload (POST /v1/jobs/upload), not as JSON", field="input"
+        if not any(f.json_input for f in kind.forms):
+            parts = ", ".join(dict.fromkeys(p.name for f in kind.forms for p in f.parts))
+            raise InputError(
+                f"{kind_name} takes its input as an upload (POST /v1/jobs/upload; parts: {parts}), not as JSON",
+                field="input",
             )
+        form = kind.form_of({}, payload)
         opts = self._options(kind, form, options)
         job_id = new_id()
         try:

@@ -9,7 +9,6 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from ...errors import MalformedInputError
 from ..kind import ArtifactSpec, FinishedJob, InputForm, InputPart, JobContext, JobOutput, Submission
 
 MARKERS_FILE = "input-markers.json"
@@ -59,11 +58,7 @@ class MarkerPoseGraph:
     limits_model = _limits()
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
-        unknown = sorted(set(files) - {"markers", "layout"})
-        if unknown:
-            raise MalformedInputError(f"unknown upload field {unknown[0]!r}", field=unknown[0])
-        if payload is None and "markers" not in files:
-            raise MalformedInputError("an upload needs 'markers'", field="markers")
+        # Unknown fields and a missing 'markers' part are the service's checks (one form, JSON or upload).
         return self.forms[0]
 
     def accept(self, sub: Submission) -> dict[str, str]:

@@ -50,8 +50,6 @@ class PanelAxis:
     limits_model: type[BaseModel] = PanelAxisLimits
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
-        if payload is not None:
-            raise InputError("panel-axis takes an upload (parts 'meta' and 'image'), not a JSON input", field="input")
         for part in ("meta", "image"):
             if part not in files:
                 raise InputError(f"an upload needs '{part}'", field=part)

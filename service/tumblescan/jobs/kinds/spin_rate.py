@@ -57,10 +57,6 @@ class SpinFromImages:
     limits_model: type[BaseModel] = SpinLimits
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
-        if payload is not None:
-            raise InputError(
-                "spin-from-images takes an upload (meta + frames, or archive), not a JSON input", field="input"
-            )
         if "archive" in files:
             return ARCHIVE_FORM
         for part in ("meta", "frames"):
