@@ -182,15 +182,13 @@ def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Pat
         typer.echo(f"wrote {out}: {len(rectified)} points rectified to t={outcome.result.reference_time_s} s", err=True)
     if report is None:
         return
-    from ..linescan.pipeline import input_form
     from ..linescan.report import ReportInputs, build_report
-    from ..linescan.tracks_io import read_tracks
     from ..linescan.truth import load_truth
 
     inputs = ReportInputs(
         result=outcome.result,
         title=f"Motion estimate: {source.stem}",
-        tracks=read_tracks(source) if input_form(source) == "tracks" else None,
+        tracks=outcome.tracks,
         distorted=outcome.cloud,
         rectified=rectified,
         truth=load_truth(truth) if truth is not None else None,

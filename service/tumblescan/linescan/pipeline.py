@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from .._typing import Progress, no_progress
 from ..errors import MalformedInputError
@@ -18,17 +18,21 @@ from ..io.sniff import sniff
 from .options import FramesOptions, TracksOptions
 from .result import MotionResult
 
+if TYPE_CHECKING:
+    from .tracks import Tracks
+
 InputForm = Literal["tracks", "frames"]
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """An estimate, the cloud it was made from or came with (None for tracks alone) and that
-    cloud rectified to the result's reference time."""
+    """An estimate, the cloud it was made from or came with (None for tracks alone), that
+    cloud rectified to the result's reference time, and the tracks it came from (None for frames)."""
 
     result: MotionResult
     cloud: TimedCloud | None
     rectified: TimedCloud | None
+    tracks: Tracks | None = None
 
 
 def input_form(path: Path, *, field: str = "file") -> InputForm:
@@ -62,11 +66,11 @@ def estimate_tracks(
     # 2. Estimate, reporting through the attempts (each report is a cancellation point).
     result = estimate_motion(tracks, options, progress=lambda stage, f: progress(stage, 0.02 + 0.9 * f))
     if cloud_path is None:
-        return Outcome(result, None, None)
+        return Outcome(result, None, None, tracks)
     # 3. Rectify the cloud that came with the tracks.
     progress("rectifying", 0.93)
     cloud = read_ply(cloud_path)
-    return Outcome(result, cloud, rectified(cloud, result))
+    return Outcome(result, cloud, rectified(cloud, result), tracks)
 
 
 def estimate_frames(path: Path, options: FramesOptions, *, progress: Progress = no_progress) -> Outcome:
