@@ -194,3 +194,15 @@ def test_submit_any_kind_by_its_parts_and_fetch_every_artifact(url: str, tmp_pat
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1
     proc = cli("submit", str(tmp_path / "missing.json"), "--url", url)
     assert proc.returncode == 2 and proc.stderr == f"error: no such file: {tmp_path / 'missing.json'}\n"
+
+
+def test_a_cloud_with_tracks_must_be_a_ply(http: httpx.Client, tmp_path: Path) -> None:
+    np.savez(tmp_path / "c.npz", xyz_m=np.zeros((10, 3)), t_s=np.arange(10.0))
+    files = {
+        "file": ("t.json", json.dumps(tracks_doc(9)).encode()),
+        "cloud": ("c.npz", (tmp_path / "c.npz").read_bytes()),
+    }
+    r = http.post("/v1/jobs/upload", files=files)
+    detail = r.json()["detail"]
+    assert r.status_code == 422 and detail["field"] == "cloud"
+    assert detail["message"] == "'cloud' must be a PLY with per-point times"

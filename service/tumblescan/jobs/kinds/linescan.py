@@ -14,6 +14,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...errors import LimitExceededError, MalformedInputError
+from ...io.sniff import sniff
 from ...linescan.options import FramesOptions, TracksOptions
 from ...linescan.pipeline import input_form
 from ...linescan.result import MotionResult
@@ -95,7 +96,7 @@ class LinescanMotion:
             _check(len(tracks), limits.max_observations, "observations")
             if "cloud" in sub.files:
                 cloud = sub.files["cloud"][0]
-                if input_form(cloud, field="cloud") != "frames":
+                if sniff(cloud) != "ply":
                     raise MalformedInputError("'cloud' must be a PLY with per-point times", field="cloud")
                 from ...io.ply import read_ply
 
@@ -106,7 +107,8 @@ class LinescanMotion:
                 raise MalformedInputError(
                     "'cloud' goes with tracks; a frames file is itself the cloud that is rectified", field="cloud"
                 )
-            options = FramesOptions.model_validate(sub.options.model_dump())
+            options = sub.options
+            assert isinstance(options, FramesOptions)
             # Assembled in full now, so a cloud that cannot be split into frames is refused at once.
             path = sub.files["file"][0]
             frames = read_frames(path, frame_period_s=options.frame_period_s, max_bytes=limits.max_cloud_points * 64)
