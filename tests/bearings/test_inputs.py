@@ -47,6 +47,8 @@ def test_the_rules_cover_the_contracts_list() -> None:
         "lon_range",
         "sigma_missing",
         "sigma_zero",
+        "sigma_tiny",
+        "position_sigma_huge",
         "sigma_large",
         "el_above_90",
         "az_nan",
@@ -55,6 +57,8 @@ def test_the_rules_cover_the_contracts_list() -> None:
         "duplicate_detection",
         "unknown_station",
         "t_not_increasing",
+        "t_too_close",
+        "t_far_from_epoch",
         "duplicate_index",
     ):
         assert rule in names
@@ -102,6 +106,7 @@ def _paths(node: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
     return out
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # an overflow means a number got past the door unchecked
 @pytest.mark.parametrize("doc", [LOCAL, ECEF], ids=["local", "ecef"])
 def test_mutated_documents_either_run_or_are_refused_never_crash(doc: dict[str, Any]) -> None:
     rng = np.random.default_rng(0)

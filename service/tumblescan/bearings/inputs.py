@@ -21,6 +21,13 @@ from .geometry import R_ecef_from_enu, Station, geodetic_to_ecef
 
 INPUT_SCHEMA = "tumblescan.bearings.input/1"
 UNITS = {"angle": "deg", "length": "m", "time": "s"}
+# Frame times are seconds from the input's epoch; beyond these the tracker's predictions lose all
+# precision (and overflow), so such times are refused at the door rather than half-processed.
+MAX_ABS_TIME_S = 1e10  # about 317 years either side of the epoch
+MIN_FRAME_STEP_S = 1e-6  # two exposures closer than a microsecond are not distinct frames
+MAX_LOCAL_COORD_M = 1e7  # a local ENU frame tangent to the Earth is meaningless much beyond this
+MAX_POSITION_SIGMA_M = 1e4
+MIN_SIGMA_DEG = 1e-9  # 3.6 micro-arcseconds: below any sensor, and far enough from 0 that 1/σ² stays finite
 JobFrame = Literal["local_enu", "ecef"]
 
 
@@ -94,8 +101,8 @@ def _number(value: Any, field: str) -> float:
 
 def _sigma_deg(value: Any, field: str) -> float:
     x = _number(value, field)
-    if not 0.0 < x < 5.0:
-        raise _bad(field, f"= {x:g} must be > 0 and < 5 degrees")
+    if not MIN_SIGMA_DEG <= x < 5.0:
+        raise _bad(field, f"= {x:g} must be >= {MIN_SIGMA_DEG:g} and < 5 degrees")
     return x
 
 
@@ -164,8 +171,8 @@ def _stations(value: Any, frame: JobFrame) -> tuple[Station, Station]:
         sa = _sigma_deg(st["sigma_az_deg"], f"{f}.sigma_az_deg")
         se = _sigma_deg(st["sigma_el_deg"], f"{f}.sigma_el_deg")
         ps = _number(st.get("position_sigma_m", 0.0), f"{f}.position_sigma_m")
-        if ps < 0.0:
-            raise _bad(f"{f}.position_sigma_m", f"= {ps:g} must be >= 0")
+        if not 0.0 <= ps <= MAX_POSITION_SIGMA_M:
+            raise _bad(f"{f}.position_sigma_m", f"= {ps:g} must be >= 0 and <= {MAX_POSITION_SIGMA_M:g} m")
         geodetic = None
         if frame == "local_enu":
             if "position_m" not in st:
@@ -174,6 +181,9 @@ def _stations(value: Any, frame: JobFrame) -> tuple[Station, Station]:
             if len(pos) != 3:
                 raise _bad(f"{f}.position_m", "must be [x, y, z] in metres")
             p = np.array([_number(v, f"{f}.position_m[{k}]") for k, v in enumerate(pos)])
+            if np.abs(p).max() > MAX_LOCAL_COORD_M:
+                too_far = f"has a coordinate over {MAX_LOCAL_COORD_M:g} m (too far for a local frame)"
+                raise _bad(f"{f}.position_m", too_far)
             R = np.eye(3)
         else:
             if "geodetic" not in st:
@@ -223,8 +233,12 @@ def _frames(value: Any, stations: tuple[Station, Station], limits: Limits) -> li
         if "t" not in fr:
             raise _bad(f"{f}.t", "is missing (seconds)")
         t = _number(fr["t"], f"{f}.t")
+        if abs(t) > MAX_ABS_TIME_S:
+            raise _bad(f"{f}.t", f"= {t:g} s is over {MAX_ABS_TIME_S:g} s from the epoch; give times relative to it")
         if t <= last_t:
             raise _bad(f"{f}.t", f"= {t:g} is not after the previous frame's {last_t:g} (t must strictly increase)")
+        if t - last_t < MIN_FRAME_STEP_S:
+            raise _bad(f"{f}.t", f"= {t:g} is less than {MIN_FRAME_STEP_S:g} s after the previous frame's {last_t:g}")
         last_t = t
         dets = _obj(fr.get("detections", {}), f"{f}.detections")
         for key in dets:

@@ -289,6 +289,8 @@ def invalid_variants(doc: dict[str, Any]) -> list[tuple[str, str, str]]:
     )
     if doc["frame"] == "local_enu":
         variant("missing_position", "stations[1].position_m", lambda d: d["stations"][1].pop("position_m"))
+        far = [-1e308, 0.0, 0.0]
+        variant("position_far", "stations[1].position_m", lambda d: d["stations"][1].update(position_m=far))
         variant("missing_geodetic", "stations[0].geodetic", lambda d: d.update(frame="ecef"))
         variant("lat_range", "stations[0].geodetic.lat_deg", lambda d: to_ecef(d, lat=95.0))
         variant("lon_range", "stations[0].geodetic.lon_deg", lambda d: to_ecef(d, lon=400.0))
@@ -301,6 +303,9 @@ def invalid_variants(doc: dict[str, Any]) -> list[tuple[str, str, str]]:
         )
     variant("sigma_missing", "stations[0].sigma_az_deg", lambda d: d["stations"][0].pop("sigma_az_deg"))
     variant("sigma_zero", "stations[0].sigma_el_deg", lambda d: d["stations"][0].update(sigma_el_deg=0.0))
+    variant("sigma_tiny", "stations[0].sigma_az_deg", lambda d: d["stations"][0].update(sigma_az_deg=1e-300))
+    huge = {"position_sigma_m": 1e300}
+    variant("position_sigma_huge", "stations[1].position_sigma_m", lambda d: d["stations"][1].update(huge))
     variant("sigma_large", "stations[1].sigma_az_deg", lambda d: d["stations"][1].update(sigma_az_deg=5.0))
     variant("sigma_text", "stations[1].sigma_el_deg", lambda d: d["stations"][1].update(sigma_el_deg="0.02"))
     variant("det_sigma_negative", f"{det0}.sigma_az_deg", lambda d: set_det(d, "sigma_az_deg", -0.01))
@@ -323,6 +328,8 @@ def invalid_variants(doc: dict[str, Any]) -> list[tuple[str, str, str]]:
     if len(doc["frames"]) > 1:
         variant("t_not_increasing", "frames[1].t", lambda d: d["frames"][1].update(t=d["frames"][0]["t"]))
         variant("duplicate_index", "frames[1].index", lambda d: d["frames"][1].update(index=d["frames"][0]["index"]))
+        variant("t_too_close", "frames[1].t", lambda d: d["frames"][1].update(t=d["frames"][0]["t"] + 1e-9))
+    variant("t_far_from_epoch", "frames[0].t", lambda d: d["frames"][0].update(t=-1e308))
     variant("t_missing", "frames[0].t", lambda d: d["frames"][0].pop("t"))
     variant("no_frames", "frames", lambda d: d.update(frames=[]))
     # Non-finite numbers as JSON tokens, which only a text document can carry.
