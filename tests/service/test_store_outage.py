@@ -74,7 +74,7 @@ def test_submissions_get_503_while_postgres_restarts_and_all_jobs_complete(tmp_p
                 with httpx.Client(base_url=url, timeout=30) as http:
                     for job_id in accepted:
                         done = wait_job(http, job_id, timeout_s=240)
-                        assert done["status"] == "succeeded", done
+                        assert done["status"] == "succeeded", (done["status"], done.get("error"), done.get("attempts"))
         finally:
             stop_load.set()
             if not pg_up():

@@ -7,7 +7,11 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
+
+from sqlalchemy.exc import OperationalError
 
 from ..errors import InputError
 from .kind import JobCancelledError, JobContext
@@ -23,32 +27,56 @@ class JobTimeoutError(Exception):
 
 # Progress is written at most this often; cancellation is still checked at every report.
 PROGRESS_INTERVAL_S = 0.2
+# How long a finished job waits for an unreachable store before giving up its result; past this
+# the lease lapses and the reaper runs the job again, so nothing is lost either way.
+STORE_PATIENCE_S = 120.0
+
+T = TypeVar("T")
+
+
+def _patiently(write: Callable[[], T], what: str) -> T:
+    """``write()``, retried with backoff while the store is unreachable (a restart, a failover)."""
+    deadline = time.monotonic() + STORE_PATIENCE_S
+    pause_s = 0.5
+    while True:
+        try:
+            return write()
+        except OperationalError:
+            if time.monotonic() + pause_s > deadline:
+                raise
+            log.warning("the store is unreachable while %s; retrying in %.1f s", what, pause_s)
+            time.sleep(pause_s)
+            pause_s = min(2 * pause_s, 5.0)
 
 
 class _Lease(threading.Thread):
     """Heartbeat thread: keeps the job's lease fresh and notices cancellation."""
 
-    def __init__(self, rt: Runtime, job_id: str) -> None:
+    def __init__(self, rt: Runtime, job_id: str, attempt: int) -> None:
         super().__init__(daemon=True, name=f"lease-{job_id}")
-        self.rt, self.job_id = rt, job_id
+        self.rt, self.job_id, self.attempt = rt, job_id, attempt
         self.cancelled = threading.Event()
         self.stopped = threading.Event()
 
     def run(self) -> None:
         while not self.stopped.wait(self.rt.settings.heartbeat_s):
             try:
-                if not self.rt.store.heartbeat(self.job_id) or self.rt.store.cancel_requested(self.job_id):
+                store, job_id, attempt = self.rt.store, self.job_id, self.attempt
+                if not store.heartbeat(job_id, attempt) or store.cancel_requested(job_id, attempt):
                     self.cancelled.set()
             except Exception:  # a store hiccup must not kill the job; the next beat retries
                 log.exception("heartbeat of job %s failed", self.job_id)
 
 
 def run_job(rt: Runtime, job_id: str) -> str | None:
-    """Run ``job_id`` if it is still queued; returns its final status (None if not ours)."""
+    """Run ``job_id`` if it is still queued; returns its final status, or None when the job is not
+    (or no longer) this run's: not queued, superseded by a rerun after a lost lease, or the store
+    stayed unreachable at the end (the reaper then runs it again)."""
     job = rt.store.claim(job_id, worker=f"{socket.gethostname()}:{os.getpid()}")
     if job is None:
         return None
-    lease = _Lease(rt, job_id)
+    attempt = job.attempts
+    lease = _Lease(rt, job_id, attempt)
     lease.start()
     last_write = [0.0]
     deadline = time.monotonic() + rt.settings.job_timeout_s
@@ -61,8 +89,13 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
         now = time.monotonic()
         if now - last_write[0] >= PROGRESS_INTERVAL_S:
             last_write[0] = now
-            rt.store.progress(job_id, stage, fraction)
-            if rt.store.cancel_requested(job_id):
+            try:
+                rt.store.progress(job_id, stage, fraction, attempt)
+                cancelled = rt.store.cancel_requested(job_id, attempt)
+            except OperationalError:  # progress is a courtesy: an outage must not cost the job
+                log.warning("progress of job %s not written: the store is unreachable", job_id)
+                cancelled = False
+            if cancelled:
                 lease.cancelled.set()
                 raise JobCancelledError
 
@@ -76,27 +109,40 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
         report("saving", 0.99)
         for file_name in out.artifacts.values():
             rt.artifacts.publish(job_id, file_name)
-        if rt.store.succeed(job_id, out.result, out.artifacts):
+        if _patiently(lambda: rt.store.succeed(job_id, out.result, out.artifacts, attempt), f"saving job {job_id}"):
             return "succeeded"
-        raise JobCancelledError  # cancelled between the last check and the result
+        raise JobCancelledError  # cancelled (or superseded) between the last check and the result
     except JobTimeoutError as exc:
-        rt.store.fail(job_id, "timeout", str(exc))
-        return "failed"
+        return _failed(rt, job_id, attempt, "timeout", str(exc))
     except JobCancelledError:
-        rt.store.mark_cancelled(job_id)
+        if not _patiently(lambda: rt.store.mark_cancelled(job_id, attempt), f"cancelling job {job_id}"):
+            # Not cancelled but superseded: a rerun owns the job (and its files) now.
+            log.warning("job %s was taken over by a rerun; attempt %d stops", job_id, attempt)
+            return None
         rt.artifacts.delete(job_id)
-        rt.store.mark_artifacts_deleted(job_id)
+        _patiently(lambda: rt.store.mark_artifacts_deleted(job_id), f"cancelling job {job_id}")
         return "cancelled"
     except InputError as exc:
-        rt.store.fail(job_id, exc.code, str(exc))
-        return "failed"
+        return _failed(rt, job_id, attempt, exc.code, str(exc))
+    except OperationalError:
+        # The store went away at a write that cannot be skipped; the lease lapses and the reaper
+        # runs the job again once the store is back, instead of the job ending as our fault.
+        log.exception("job %s left to the reaper: the store is unreachable", job_id)
+        return None
     except OSError as exc:
         log.exception("job %s failed on storage", job_id)
-        rt.store.fail(job_id, "storage_error", f"{type(exc).__name__}: {exc}")
-        return "failed"
+        return _failed(rt, job_id, attempt, "storage_error", f"{type(exc).__name__}: {exc}")
     except Exception as exc:
         log.exception("job %s failed", job_id)
-        rt.store.fail(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
-        return "failed"
+        return _failed(rt, job_id, attempt, "internal_error", f"{type(exc).__name__}: {exc}")
     finally:
         lease.stopped.set()
+
+
+def _failed(rt: Runtime, job_id: str, attempt: int, code: str, message: str) -> str | None:
+    try:
+        if _patiently(lambda: rt.store.fail(job_id, code, message, attempt=attempt), f"failing job {job_id}"):
+            return "failed"
+    except OperationalError:
+        log.exception("job %s left to the reaper: its failure could not be recorded", job_id)
+    return None  # superseded, cancelled meanwhile, or the store stayed away: not this run's to set

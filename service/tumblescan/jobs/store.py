@@ -232,34 +232,39 @@ class JobStore:
             ).rowcount
         return self.get(job_id) if done else None
 
-    def heartbeat(self, job_id: str) -> bool:
+    # A run's writes name its attempt (the number ``claim`` gave it): a run that lost its lease and
+    # was superseded by a rerun must not overwrite, cancel or delete the rerun's job.
+
+    def heartbeat(self, job_id: str, attempt: int | None = None) -> bool:
         """Refresh the lease; False when the job is no longer ours to run."""
         with self._tx() as conn:
             return bool(
-                conn.execute(
-                    update(jobs).where(jobs.c.id == job_id, jobs.c.status == "running").values(heartbeat_at=time.time())
-                ).rowcount
+                conn.execute(update(jobs).where(*_running(job_id, attempt)).values(heartbeat_at=time.time())).rowcount
             )
 
-    def progress(self, job_id: str, stage: str, fraction: float) -> None:
+    def progress(self, job_id: str, stage: str, fraction: float, attempt: int | None = None) -> None:
         with self._tx() as conn:
             conn.execute(
                 update(jobs)
-                .where(jobs.c.id == job_id, jobs.c.status == "running")
+                .where(*_running(job_id, attempt))
                 .values(stage=stage, progress=max(0.0, min(1.0, fraction)), heartbeat_at=time.time())
             )
 
-    def cancel_requested(self, job_id: str) -> bool:
+    def cancel_requested(self, job_id: str, attempt: int | None = None) -> bool:
+        """True when the run should stop: cancellation asked, or the job is no longer this run's."""
         with self.engine.connect() as conn:
-            row = conn.execute(select(jobs.c.cancel_requested, jobs.c.status).where(jobs.c.id == job_id)).first()
-        return row is None or bool(row[0]) or row[1] != "running"
+            q = select(jobs.c.cancel_requested, jobs.c.status, jobs.c.attempts).where(jobs.c.id == job_id)
+            row = conn.execute(q).first()
+        return row is None or bool(row[0]) or row[1] != "running" or (attempt is not None and row[2] != attempt)
 
-    def succeed(self, job_id: str, result: dict[str, Any], artifacts: dict[str, str]) -> bool:
+    def succeed(
+        self, job_id: str, result: dict[str, Any], artifacts: dict[str, str], attempt: int | None = None
+    ) -> bool:
         with self._tx() as conn:
             return bool(
                 conn.execute(
                     update(jobs)
-                    .where(jobs.c.id == job_id, jobs.c.status == "running", jobs.c.cancel_requested.is_(False))
+                    .where(*_running(job_id, attempt), jobs.c.cancel_requested.is_(False))
                     .values(
                         status="succeeded",
                         progress=1.0,
@@ -271,12 +276,21 @@ class JobStore:
                 ).rowcount
             )
 
-    def fail(self, job_id: str, code: str, message: str, *, from_status: tuple[str, ...] = ("running",)) -> bool:
+    def fail(
+        self,
+        job_id: str,
+        code: str,
+        message: str,
+        *,
+        from_status: tuple[str, ...] = ("running",),
+        attempt: int | None = None,
+    ) -> bool:
+        fence = [] if attempt is None else [jobs.c.attempts == attempt]
         with self._tx() as conn:
             return bool(
                 conn.execute(
                     update(jobs)
-                    .where(jobs.c.id == job_id, jobs.c.status.in_(from_status))
+                    .where(jobs.c.id == job_id, jobs.c.status.in_(from_status), *fence)
                     .values(
                         status="failed", stage="failed", finished_at=time.time(), error_code=code, error_message=message
                     )
@@ -297,13 +311,13 @@ class JobStore:
             )
         return self.get(job_id)
 
-    def mark_cancelled(self, job_id: str) -> bool:
+    def mark_cancelled(self, job_id: str, attempt: int | None = None) -> bool:
         """A running job's worker acknowledges the cancellation."""
         with self._tx() as conn:
             return bool(
                 conn.execute(
                     update(jobs)
-                    .where(jobs.c.id == job_id, jobs.c.status == "running")
+                    .where(*_running(job_id, attempt))
                     .values(status="cancelled", stage="cancelled", finished_at=time.time())
                 ).rowcount
             )
@@ -443,3 +457,9 @@ def _engine(url: str) -> Engine:
 
         return engine
     return create_engine(url, pool_pre_ping=True, pool_size=5, max_overflow=10)
+
+
+def _running(job_id: str, attempt: int | None) -> list[Any]:
+    """The job is running, and (when ``attempt`` is given) as that attempt."""
+    where = [jobs.c.id == job_id, jobs.c.status == "running"]
+    return where if attempt is None else [*where, jobs.c.attempts == attempt]

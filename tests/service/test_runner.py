@@ -1,0 +1,129 @@
+"""A store outage during a job costs progress notes, never the job or its result."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from sqlalchemy.exc import OperationalError
+
+from tumblescan.jobs import runner
+from tumblescan.jobs.artifacts import ArtifactStore
+from tumblescan.jobs.kind import JobContext, JobOutput
+from tumblescan.jobs.runtime import Runtime
+from tumblescan.jobs.store import JobStore
+from tumblescan.settings import Settings
+
+
+class FlakyStore(JobStore):
+    """A real SQLite store whose named writes fail ``outages[name]`` times before they work."""
+
+    def __init__(self, url: str, outages: dict[str, int]) -> None:
+        super().__init__(url)
+        self.outages = dict(outages)
+        self.calls: dict[str, int] = {}
+
+    def _maybe_down(self, name: str) -> None:
+        self.calls[name] = self.calls.get(name, 0) + 1
+        if self.outages.get(name, 0) > 0:
+            self.outages[name] -= 1
+            raise OperationalError("UPDATE jobs", {}, Exception("connection refused"))
+
+    def progress(self, job_id: str, stage: str, fraction: float, attempt: int | None = None) -> None:
+        self._maybe_down("progress")
+        super().progress(job_id, stage, fraction, attempt)
+
+    def succeed(
+        self, job_id: str, result: dict[str, Any], artifacts: dict[str, str], attempt: int | None = None
+    ) -> bool:
+        self._maybe_down("succeed")
+        return super().succeed(job_id, result, artifacts, attempt)
+
+    def fail(
+        self,
+        job_id: str,
+        code: str,
+        message: str,
+        *,
+        from_status: tuple[str, ...] = ("running",),
+        attempt: int | None = None,
+    ) -> bool:
+        self._maybe_down("fail")
+        return super().fail(job_id, code, message, from_status=from_status, attempt=attempt)
+
+
+class CountingKind:
+    """Reports progress a few times, then returns a result (or raises what it is given)."""
+
+    name = "counting"
+
+    def __init__(self, error: Exception | None = None, meanwhile: Callable[[], None] | None = None) -> None:
+        self.error, self.meanwhile = error, meanwhile
+
+    def run(self, ctx: JobContext) -> JobOutput:
+        for i in range(5):
+            ctx.report("counting", i / 5)
+            if i == 2 and self.meanwhile is not None:
+                self.meanwhile()
+        if self.error is not None:
+            raise self.error
+        return JobOutput(result={"counted": 5})
+
+
+def setup(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kind: CountingKind, **outages: int) -> tuple[Runtime, str]:
+    monkeypatch.setattr(runner, "get_kind", lambda name: kind)
+    monkeypatch.setattr(runner, "PROGRESS_INTERVAL_S", 0.0)  # every report writes
+    settings = Settings(data_dir=tmp_path)
+    store = FlakyStore(settings.db_url, outages)
+    rt = Runtime(settings, store, ArtifactStore(settings.artifacts))
+    job = store.create(kind="counting", options={}, input={"data": "input-data.bin"}, owner=None)
+    rt.artifacts.job_dir(job.id).mkdir(parents=True)
+    rt.artifacts.path(job.id, "input-data.bin").write_bytes(b"uploaded")
+    return rt, job.id
+
+
+def test_a_job_survives_the_store_going_away_during_progress_and_at_its_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(), progress=3, succeed=2)
+    assert runner.run_job(rt, job_id) == "succeeded"
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "succeeded" and job.result == {"counted": 5}
+    assert rt.store.calls["succeed"] == 3  # type: ignore[attr-defined]
+
+
+def test_a_failure_is_recorded_once_the_store_is_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(RuntimeError("boom")), fail=2)
+    assert runner.run_job(rt, job_id) == "failed"
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "failed" and job.error_code == "internal_error"
+
+
+def test_a_store_that_stays_down_leaves_the_job_to_the_reaper(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(), succeed=1000)
+    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
+    assert runner.run_job(rt, job_id) is None
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "running"  # the reaper requeues it when the lease lapses
+
+
+def test_a_run_superseded_by_a_rerun_stops_without_touching_the_rerun_or_its_files(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    kind = CountingKind()
+    rt, job_id = setup(tmp_path, monkeypatch, kind)
+
+    def lease_lost_and_rerun() -> None:  # what the reaper and another worker do while this run is cut off
+        assert rt.store.requeue(job_id)
+        assert rt.store.claim(job_id, worker="other:1") is not None
+
+    kind.meanwhile = lease_lost_and_rerun
+    assert runner.run_job(rt, job_id) is None
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "running" and job.attempts == 2 and job.worker == "other:1"
+    assert rt.artifacts.path(job_id, "input-data.bin").read_bytes() == b"uploaded"
+    # The late run's writes are refused; the rerun's go through.
+    assert not rt.store.succeed(job_id, {"late": True}, {}, attempt=1)
+    assert rt.store.succeed(job_id, {"counted": 5}, {}, attempt=2)
