@@ -38,6 +38,9 @@ def test_cli_estimate_json_prints_one_document_and_writes_a_report(tmp_path: Pat
     assert doc["summary"]["targets"] == sum(len(f["targets"]) for f in doc["frames"])
     text = report.read_text()
     assert "bearings-3d" in text and "Unassociated" in text and "<h2>Tracks</h2>" in text
+    # The close-up draws one line per track, named as in the result.
+    assert doc["tracks"] and "bearings-close-up" in text
+    assert all(f'"name":"{track["id"]}"' in text for track in doc["tracks"])
 
 
 def test_cli_estimate_paper_method(tmp_path: Path) -> None:

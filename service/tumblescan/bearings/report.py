@@ -19,7 +19,13 @@ MAX_TABLE_ROWS = 300
 
 def build_report(inp: BearingsInput, result: dict[str, Any], *, title: str) -> str:
     """The whole HTML page."""
-    sections = [_summary(inp, result), _figure(inp, result), _tracks(result), _tables(inp, result)]
+    sections = [
+        _summary(inp, result),
+        _figure(inp, result),
+        _close_up(inp, result),
+        _tracks(result),
+        _tables(inp, result),
+    ]
     return page(title, sections)
 
 
@@ -39,7 +45,7 @@ def _summary(inp: BearingsInput, result: dict[str, Any]) -> str:
         ("time", f"{result.get('timings_ms', {}).get('total', float('nan')):.0f} ms"),
     ]
     warnings = "".join(f"<p class='warn'>{html.escape(w)}</p>" for w in result.get("warnings", []))
-    return "<h2>Summary</h2>" + table_html(["", ""], rows) + warnings
+    return "<h2>Summary</h2>" + table_html(["quantity", "value"], rows) + warnings
 
 
 def _ellipsoid(p: np.ndarray, cov: np.ndarray, n: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -153,6 +159,72 @@ def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
     return "<h2>Geometry</h2>" + note + figure_html(fig, "bearings-3d")
 
 
+def _close_up(inp: BearingsInput, result: dict[str, Any]) -> str:
+    """The targets alone, scaled to them: each track's fixes over the frames joined in time order,
+    untracked fixes as dots, and frame 0's 1σ ellipsoids (the geometry view above is scaled to the
+    baseline, where a cluster of targets a kilometre away is a few pixels wide)."""
+    import plotly.graph_objects as go
+
+    origin = 0.5 * (inp.stations[0].p_job_m + inp.stations[1].p_job_m)
+    by_track: dict[str, list[tuple[float, np.ndarray]]] = {}
+    loose: list[np.ndarray] = []
+    for fr in result["frames"]:
+        for t in fr["targets"]:
+            p = np.asarray(t["position_m"]) - origin
+            if t.get("track"):
+                by_track.setdefault(t["track"], []).append((fr["t"], p))
+            else:
+                loose.append(p)
+    if not by_track and not loose:
+        return ""
+    fig = go.Figure()
+    palette = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf")
+    for i, (track, fixes) in enumerate(sorted(by_track.items())[:MAX_ELLIPSOIDS]):
+        a = np.array([p for _, p in sorted(fixes, key=lambda f: f[0])])
+        fig.add_trace(
+            go.Scatter3d(
+                x=a[:, 0],
+                y=a[:, 1],
+                z=a[:, 2],
+                mode="lines+markers",
+                marker={"size": 3, "color": palette[i % len(palette)]},
+                line={"color": palette[i % len(palette)], "width": 3},
+                name=track,
+            )
+        )
+    if loose:
+        a = np.array(loose)
+        fig.add_trace(
+            go.Scatter3d(
+                x=a[:, 0], y=a[:, 1], z=a[:, 2], mode="markers", marker={"size": 2, "color": "gray"}, name="untracked"
+            )
+        )
+    for t in result["frames"][0]["targets"][:MAX_ELLIPSOIDS]:
+        x, y, z = _ellipsoid(np.asarray(t["position_m"]) - origin, np.asarray(t["cov_m2"]))
+        fig.add_trace(
+            go.Surface(
+                x=x,
+                y=y,
+                z=z,
+                opacity=0.25,
+                showscale=False,
+                colorscale=[[0, "green"], [1, "green"]],
+                hoverinfo="skip",
+                showlegend=False,
+            )
+        )
+    fig.update_layout(
+        height=600,
+        scene={"aspectmode": "data", "xaxis_title": "x (m)", "yaxis_title": "y (m)", "zaxis_title": "z (m)"},
+        margin={"l": 0, "r": 0, "t": 30, "b": 0},
+    )
+    note = (
+        "<p class='note'>The targets alone: each track's fixes joined in time order (one colour per track), "
+        "untracked fixes in gray, frame 0's 1-sigma ellipsoids in green. Same coordinates as above.</p>"
+    )
+    return "<h2>Targets close up</h2>" + note + figure_html(fig, "bearings-close-up")
+
+
 def _tracks(result: dict[str, Any]) -> str:
     tracks = result.get("tracks", [])
     if not tracks:
@@ -211,5 +283,6 @@ def _tables(inp: BearingsInput, result: dict[str, Any]) -> str:
         parts.append(
             table_html(["target", "track", s1, s2, "position (m)", "sigma (m)", "chi2", "parallax (°)", "flags"], rows)
         )
-        parts.append(f"<p class='warn'>Unassociated: {html.escape(un)}</p>")
+        css = "warn" if any(fr["unassociated"].values()) else "note"
+        parts.append(f"<p class='{css}'>Unassociated: {html.escape(un)}</p>")
     return "".join(parts)
