@@ -25,11 +25,11 @@ from .axis import (
     PlaneObs,
     angle_between_lines_deg,
     fit_direction,
-    fit_with_orthogonal,
     with_edge_bias,
 )
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
+from .frame_fit import FrameFit, fit_panel_frame
 from .meta import PanelAxisInput
 from .options import EstimateOptions
 from .outputs import Frames
@@ -95,13 +95,19 @@ def estimate_axis(
     if extent < MIN_AXIS_EXTENT_PX:
         raise DegenerateViewError(f"image: the projected axis is {extent:.0f} px long (30 px needed)", field="image")
     fit = fit_direction([e.plane for e in axis_family.edges])
-    # 5. The short family and orthogonality (separate fits), then the axis refitted with every
-    # family that is orthogonal to it within its σ.
+    # 5. The panel frame: the short family (the wing ends and sub-panel gaps) and every other family
+    # orthogonal to the axis within its σ, fitted jointly with the axis (orthogonal by construction).
+    # The separate fits are kept for the paper's Table 2 check.
     short_family, short_fit = _short_family(families, axis_family, fit.direction)
-    orthogonal = _orthogonal_families(families, axis_family, fit)
     separate = fit
-    if orthogonal:
-        fit = fit_with_orthogonal(fit, [e.plane for e in axis_family.edges], orthogonal)
+    others = _orthogonal_families(families, axis_family, fit, exclude=short_family)
+    short_joint = short_family is not None and short_fit is not None and _orthogonal_within_sigma(fit, short_fit)
+    if short_joint:
+        assert short_family is not None and short_fit is not None
+        others = [(short_fit, [e.plane for e in short_family.edges])] + others
+    frame = fit_panel_frame(fit, [e.plane for e in axis_family.edges], others) if others else None
+    if frame is not None:
+        fit = frame.axis
     fit = with_edge_bias(fit, [e.plane for e in axis_family.edges], [e.line.half_length_px for e in axis_family.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
@@ -138,7 +144,9 @@ def estimate_axis(
             tilt_deg=tilt,
             sigma_tilt_deg=sigma_tilt,
         ),
-        panel=_panel(separate, axis_family, short_family, short_fit, frames, corners),
+        panel=_panel(
+            fit, separate, axis_family, short_family, short_fit, frame if short_joint else None, frames, corners
+        ),
         segmentation=Segmentation(
             threshold=target.threshold,
             target_px=target.target_px,
@@ -191,18 +199,24 @@ def _short_family(
     return best, fit_direction([e.plane for e in best.edges], reject=True)
 
 
+def _orthogonal_within_sigma(fit: DirectionFit, other: DirectionFit) -> bool:
+    """Whether two separately fitted directions are orthogonal within 3σ (both fits) plus 0.5° (an
+    allowance for edge-model bias, which the fits' σ do not hold)."""
+    tol = np.radians(0.5) + 3 * np.hypot(fit.sigma_rad, other.sigma_rad)
+    return bool(abs(float(other.direction @ fit.direction)) < np.sin(tol))
+
+
 def _orthogonal_families(
-    families: list[Family], axis_family: Family, fit: DirectionFit
+    families: list[Family], axis_family: Family, fit: DirectionFit, *, exclude: Family | None = None
 ) -> list[tuple[DirectionFit, list[PlaneObs]]]:
-    """Families of 3+ edges whose direction is orthogonal to the axis within 3σ (both fits) plus 0.5°
-    (two edges always fit a direction exactly, so a pair cannot show it is a family)."""
+    """Families of 3+ edges (two edges always fit a direction exactly, so a pair cannot show it is
+    a family) other than ``exclude``, orthogonal to the axis within σ (``_orthogonal_within_sigma``)."""
     out = []
     for fam in families:
-        if fam is axis_family or len(fam.edges) < 3:
+        if fam is axis_family or fam is exclude or len(fam.edges) < 3:
             continue
         f2 = fit_direction([e.plane for e in fam.edges])
-        tol = np.radians(0.5) + 3 * np.hypot(fit.sigma_rad, f2.sigma_rad)
-        if abs(float(f2.direction @ fit.direction)) < np.sin(tol):
+        if _orthogonal_within_sigma(fit, f2):
             out.append((f2, [e.plane for e in fam.edges]))
     return out
 
@@ -301,12 +315,18 @@ def _weak_answer(
 
 def _panel(
     fit: DirectionFit,
+    separate: DirectionFit,
     family: Family,
     short_family: Family | None,
     short_fit: DirectionFit | None,
+    frame: FrameFit | None,
     frames: Frames,
     corners: FloatArray | None,
 ) -> Panel:
+    """The panel block. With ``frame`` (the short family fitted jointly with the axis) the short axis
+    is the frame's, orthogonal to the reported axis by construction; without it (no short family, or
+    one not orthogonal to the axis within its σ) it is the short family's own fit. Either way the
+    paper's Table 2 check is between the separate fits ``separate`` and ``short_fit``."""
     rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
     panel = Panel(
         edge_rms_px=rms,
@@ -314,17 +334,35 @@ def _panel(
         long_edges=len(family.edges),
         wing_corners_px=corners.tolist() if corners is not None else None,
     )
-    if short_family is not None and short_fit is not None:
-        panel.short_axis = frames.direction(short_fit.direction)
-        panel.normal = frames.direction(np.cross(fit.direction, short_fit.direction))
-        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short_fit.direction))
-        # σ of d·d_short from both fits' covariances (the angle moves by that much in radians).
-        g1, g2 = fit.basis @ short_fit.direction, short_fit.basis @ fit.direction
-        var = float(g1 @ fit.cov_tangent_rad2 @ g1 + g2 @ short_fit.cov_tangent_rad2 @ g2)
-        panel.orthogonality_sigma_deg = float(np.degrees(np.sqrt(max(var, 0.0))))
-        panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
-        panel.short_edges = len(short_family.edges)
+    if short_family is None or short_fit is None:
+        return panel
+    check, check_sigma = _orthogonality(separate, short_fit)
+    panel.table2_orthogonality_deg, panel.table2_orthogonality_sigma_deg = check, check_sigma
+    panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
+    panel.short_edges = len(short_family.edges)
+    if frame is not None:
+        short = frame.directions[0]
+        panel.frame = "joint"
+        panel.short_axis_sigma_deg = float(np.degrees(frame.sigma_rad(0)))
+        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short))
+        panel.orthogonality_sigma_deg = 0.0
+    else:
+        short = short_fit.direction
+        panel.frame = "separate"
+        panel.short_axis_sigma_deg = float(np.degrees(short_fit.sigma_rad))
+        panel.orthogonality_deg, panel.orthogonality_sigma_deg = _orthogonality(fit, short_fit)
+    panel.short_axis = frames.direction(short)
+    n = np.cross(fit.direction, short)
+    panel.normal = frames.direction(n / np.linalg.norm(n))
     return panel
+
+
+def _orthogonality(a: DirectionFit, b: DirectionFit) -> tuple[float, float]:
+    """``|90° − angle(a, b)|`` (deg) and its σ from both fits' covariances (``a·b`` moves the angle
+    by that much in radians)."""
+    g1, g2 = a.basis @ b.direction, b.basis @ a.direction
+    var = float(g1 @ a.cov_tangent_rad2 @ g1 + g2 @ b.cov_tangent_rad2 @ g2)
+    return abs(90.0 - angle_between_lines_deg(a.direction, b.direction)), float(np.degrees(np.sqrt(max(var, 0.0))))
 
 
 def _paper_result(
