@@ -36,7 +36,7 @@ from .outputs import Frames
 from .paper import estimate_paper
 from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
-from .weak import best_wing, ippe_candidates, wing_corners
+from .weak import best_wing, hidden_root_corners, ippe_candidates, wing_corners
 
 MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
 MIN_TIP_WIDTH_PX = 4.0  # under it the panel is seen edge-on
@@ -124,7 +124,9 @@ def estimate_axis(
     corners = None
     if weak:
         warnings.append("weak_perspective")
-        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options, warnings)
+        axis, candidates, corners = _weak_answer(
+            meta, axis_family, edges, target, camera, frames, rng, options, warnings
+        )
     else:
         axis = frames.axis(fit.direction, fit.cov_tangent_rad2, fit.basis)
     image_angle = float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0)
@@ -262,6 +264,7 @@ def _weak_answer(
     meta: PanelAxisInput,
     family: Family,
     edges: list[Edge],
+    target: Target,
     camera: PinholeCamera,
     frames: Frames,
     rng: np.random.Generator,
@@ -279,7 +282,14 @@ def _weak_answer(
         return None, [], None
     assert meta.prior is not None and meta.prior.panel_length_m is not None and meta.prior.panel_width_m is not None
     L, W = meta.prior.panel_length_m, meta.prior.panel_width_m
-    found = best_wing(wing_corners(family, edges), L, W, camera, meta.prior.range_m)
+    range_m = meta.prior.range_m
+    found = best_wing(wing_corners(family, edges), L, W, camera, range_m)
+    if found is None and range_m is not None:
+        # A wing's root is often hidden behind the bus: its corners then come from the tip's and the
+        # prior. Tried only when no set of four seen corners fits: near a face-on short edge the
+        # derived root is sensitive to the tip's width, and a seen root is better.
+        hidden = hidden_root_corners(family, edges, target.mask, L, W, camera.focal_px / range_m)
+        found = best_wing(hidden, L, W, camera, range_m)
     if found is None:
         if options.require_axis:
             raise DepthUnobservableError(
@@ -287,12 +297,15 @@ def _weak_answer(
             )
         warnings.append("wing_corners_not_found")
         return None, [], None
-    corners, sigma_px, fit_px = found
+    corner_set, fit_px = found
+    corners = corner_set.corners_px
     if fit_px > MAX_CORNER_FIT_PX:
         warnings.append("wing_corners_misfit")
+    if corner_set.rebuild is not None:
+        warnings.append("wing_root_hidden")
     # A rectangle that fits the corners worse than their noise says the corners are off by about
     # that much: the Monte Carlo uses the larger of the two.
-    poses = ippe_candidates(corners, L, W, camera, max(sigma_px, fit_px), rng)
+    poses = ippe_candidates(corner_set, L, W, camera, max(corner_set.sigma_px, fit_px), rng)
     if not poses:
         return None, [], corners
     cands = []
