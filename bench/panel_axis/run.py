@@ -76,6 +76,7 @@ def run_one(view: SimulatedView, method: str, *, drop_prior: bool = False) -> di
     if r.panel.short_axis is not None and "panel_normal_camera" in view.truth:
         short_true = np.cross(view.truth["axis_camera"], view.truth["panel_normal_camera"])
         out["short_err"] = _angle_deg(r.panel.short_axis.camera, short_true)
+        out["short_sigma"] = r.panel.short_axis_sigma_deg
     if r.axis is not None:
         out["err"] = _angle_deg(r.axis.camera, truth["axis_camera"])
         out["sigma"] = r.axis.sigma_deg
@@ -131,7 +132,13 @@ def near_rows(cases: list[dict[str, Any]], noisy: bool) -> list[list[str]]:
         joint = sum(r.get("frame") == "joint" for r, _ in ok)
         row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)}, joint {joint})"]
         short = [r["short_err"] for r, _ in ok if "short_err" in r]
-        row += [f"{_q(short, 50):.3f} / {_q(short, 90):.3f}" if short else "-"]
+        sz = [r["short_err"] / r["short_sigma"] for r, _ in ok if "short_err" in r and r.get("short_sigma")]
+        row += [
+            f"{_q(short, 50):.3f} / {_q(short, 90):.3f}"
+            + (f" (> 3 sigma {100 * np.mean(np.array(sz) > 3):.0f} %)" if sz else "")
+            if short
+            else "-"
+        ]
         if method == "ours":
             t2 = [r["t2"] for r, _ in ok if r.get("t2") is not None]
             oz = [r["t2"] / r["t2_sigma"] for r, _ in ok if r.get("t2") is not None and r.get("t2_sigma")]
