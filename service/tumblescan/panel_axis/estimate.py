@@ -29,13 +29,14 @@ from .axis import (
 )
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
-from .frame_fit import FrameFit, fit_panel_frame
+from .frame_fit import fit_about_axis, fit_panel_frame
 from .meta import PanelAxisInput
 from .options import EstimateOptions
 from .outputs import Frames
 from .paper import estimate_paper
 from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
+from .short_family import short_family
 from .weak import best_wing, hidden_root_corners, ippe_candidates, wing_corners
 
 MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
@@ -94,21 +95,23 @@ def estimate_axis(
     extent = _extent(axis_family)
     if extent < MIN_AXIS_EXTENT_PX:
         raise DegenerateViewError(f"image: the projected axis is {extent:.0f} px long (30 px needed)", field="image")
-    fit = fit_direction([e.plane for e in axis_family.edges])
-    # 5. The panel frame: the short family (the wing ends and sub-panel gaps) and every other family
-    # orthogonal to the axis within its σ, fitted jointly with the axis (orthogonal by construction).
-    # The separate fits are kept for the paper's Table 2 check.
-    short_family, short_fit = _short_family(families, axis_family, fit.direction)
+    axis_planes = [e.plane for e in axis_family.edges]
+    fit = fit_direction(axis_planes)
+    # 5. The panel frame. The axis is refitted with the families found orthogonal to it (bus edges
+    # across it; they also expose a biased axis edge). The wing's short edges are then found about
+    # that axis, and when their own fit is orthogonal to it within σ, the short axis is fitted with
+    # the axis held (orthogonal to it by construction). The Table 2 check is between that axis and the
+    # short edges' own fit.
+    orthogonal = _orthogonal_families(families, axis_family, fit, set())
+    if orthogonal:
+        fit = fit_panel_frame(fit, axis_planes, _planes(orthogonal)).axis
     separate = fit
-    others = _orthogonal_families(families, axis_family, fit, exclude=short_family)
-    short_joint = short_family is not None and short_fit is not None and _orthogonal_within_sigma(fit, short_fit)
-    if short_joint:
-        assert short_family is not None and short_fit is not None
-        others = [(short_fit, [e.plane for e in short_family.edges])] + others
-    frame = fit_panel_frame(fit, [e.plane for e in axis_family.edges], others) if others else None
-    if frame is not None:
-        fit = frame.axis
-    fit = with_edge_bias(fit, [e.plane for e in axis_family.edges], [e.line.half_length_px for e in axis_family.edges])
+    short = short_family(edges, axis_family, fit.direction)
+    short_fit = fit_direction([e.plane for e in short.edges], reject=True) if short is not None else None
+    fit = with_edge_bias(fit, axis_planes, [e.line.half_length_px for e in axis_family.edges])
+    constrained = None
+    if short is not None and short_fit is not None and _orthogonal_within_sigma(separate, short_fit):
+        constrained = fit_about_axis(fit, short_fit, [e.plane for e in short.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
     a_img = axis_family.image_direction()
@@ -146,9 +149,7 @@ def estimate_axis(
             tilt_deg=tilt,
             sigma_tilt_deg=sigma_tilt,
         ),
-        panel=_panel(
-            fit, separate, axis_family, short_family, short_fit, frame if short_joint else None, frames, corners
-        ),
+        panel=_panel(fit, separate, axis_family, short, short_fit, constrained, frames, corners),
         segmentation=Segmentation(
             threshold=target.threshold,
             target_px=target.target_px,
@@ -183,24 +184,6 @@ def _extent(family: Family) -> float:
     return float(np.ptp(s))
 
 
-def _short_family(
-    families: list[Family], axis_family: Family, d: FloatArray
-) -> tuple[Family | None, DirectionFit | None]:
-    """The family within 10° of orthogonal to the axis with the most edge length (the wing ends
-    and sub-panel gaps, usually), fitted with edges over 5σ dropped."""
-    best = None
-    for fam in families:
-        if fam is axis_family or len(fam.edges) < 2:
-            continue
-        if angle_between_lines_deg(fam.direction, d) < 80.0:
-            continue
-        if best is None or fam.total_length_px > best.total_length_px:
-            best = fam
-    if best is None:
-        return None, None
-    return best, fit_direction([e.plane for e in best.edges], reject=True)
-
-
 def _orthogonal_within_sigma(fit: DirectionFit, other: DirectionFit) -> bool:
     """Whether two separately fitted directions are orthogonal within 3σ (both fits) plus 0.5° (an
     allowance for edge-model bias, which the fits' σ do not hold)."""
@@ -209,18 +192,24 @@ def _orthogonal_within_sigma(fit: DirectionFit, other: DirectionFit) -> bool:
 
 
 def _orthogonal_families(
-    families: list[Family], axis_family: Family, fit: DirectionFit, *, exclude: Family | None = None
-) -> list[tuple[DirectionFit, list[PlaneObs]]]:
+    families: list[Family], axis_family: Family, fit: DirectionFit, exclude: set[int]
+) -> list[tuple[DirectionFit, list[Edge]]]:
     """Families of 3+ edges (two edges always fit a direction exactly, so a pair cannot show it is
-    a family) other than ``exclude``, orthogonal to the axis within σ (``_orthogonal_within_sigma``)."""
+    a family), without the edges whose id is in ``exclude``, orthogonal to the axis within σ
+    (``_orthogonal_within_sigma``), each with its separate fit."""
     out = []
     for fam in families:
-        if fam is axis_family or fam is exclude or len(fam.edges) < 3:
+        kept = [e for e in fam.edges if id(e) not in exclude]
+        if fam is axis_family or len(kept) < 3:
             continue
-        f2 = fit_direction([e.plane for e in fam.edges])
+        f2 = fit_direction([e.plane for e in kept])
         if _orthogonal_within_sigma(fit, f2):
-            out.append((f2, [e.plane for e in fam.edges]))
+            out.append((f2, kept))
     return out
+
+
+def _planes(groups: list[tuple[DirectionFit, list[Edge]]]) -> list[tuple[DirectionFit, list[PlaneObs]]]:
+    return [(f, [e.plane for e in edges]) for f, edges in groups]
 
 
 def _perspective_snr(family: Family, a_img: FloatArray, camera: PinholeCamera) -> float:
@@ -332,14 +321,15 @@ def _panel(
     family: Family,
     short_family: Family | None,
     short_fit: DirectionFit | None,
-    frame: FrameFit | None,
+    constrained: tuple[FloatArray, FloatArray] | None,
     frames: Frames,
     corners: FloatArray | None,
 ) -> Panel:
-    """The panel block. With ``frame`` (the short family fitted jointly with the axis) the short axis
-    is the frame's, orthogonal to the reported axis by construction; without it (no short family, or
-    one not orthogonal to the axis within its σ) it is the short family's own fit. Either way the
-    paper's Table 2 check is between the separate fits ``separate`` and ``short_fit``."""
+    """The panel block. With ``constrained`` (the short axis fitted ⟂ the axis, and its (3, 3)
+    covariance) the short axis is orthogonal to the reported axis by construction; without it (no
+    short edges, or short edges not orthogonal to the axis within σ) it is the short edges' own fit.
+    Either way the paper's Table 2 check is between ``separate`` (the axis, without the short edges'
+    σ-free bias term) and ``short_fit`` (the short edges alone)."""
     rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
     panel = Panel(
         edge_rms_px=rms,
@@ -353,10 +343,10 @@ def _panel(
     panel.table2_orthogonality_deg, panel.table2_orthogonality_sigma_deg = check, check_sigma
     panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
     panel.short_edges = len(short_family.edges)
-    if frame is not None:
-        short = frame.directions[0]
+    if constrained is not None:
+        short, cov = constrained
         panel.frame = "joint"
-        panel.short_axis_sigma_deg = float(np.degrees(frame.sigma_rad(0)))
+        panel.short_axis_sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
         panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short))
         panel.orthogonality_sigma_deg = 0.0
     else:

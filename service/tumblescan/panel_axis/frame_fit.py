@@ -120,3 +120,37 @@ def _jacobian(f: Callable[[FloatArray], FloatArray], x: FloatArray, h: float = 1
         step[k] = h
         cols.append((f(x + step) - f(x - step)) / (2 * h))
     return np.column_stack(cols)
+
+
+def fit_about_axis(axis: DirectionFit, fit: DirectionFit, planes: list[PlaneObs]) -> tuple[FloatArray, FloatArray]:
+    """A family's direction constrained ⟂ a given axis: ``s(ψ) = cos ψ·e1 + sin ψ·e2`` in the axis's
+    tangent basis, ``ψ = argmin Σ_k w_k (n_k·s)²/σ_k(s)²`` (Huber weights ``w_k`` of the family's
+    separate ``fit``, which also gives the start). Returns the unit direction (3,) and its (3, 3)
+    covariance: ``var ψ`` along ``d × s`` (from the Gauss-Newton curvature, times
+    ``max(1, χ²/dof)``) plus the axis's own uncertainty, which tips ``s`` toward ``d`` by ``s·δd``."""
+    from scipy.optimize import least_squares
+
+    d = axis.direction
+    e1, e2 = axis.basis[0], axis.basis[1]
+    st = PlaneStack(planes)
+    sw = np.sqrt(fit.weights)
+
+    def s_of(psi: float) -> FloatArray:
+        return np.asarray(np.cos(psi) * e1 + np.sin(psi) * e2, dtype=float)
+
+    def residuals(p: FloatArray) -> FloatArray:
+        s = s_of(float(p[0]))
+        return np.asarray(sw * (st.N @ s) / np.sqrt(st.sigma2(s)), dtype=float)
+
+    psi0 = float(np.arctan2(fit.direction @ e2, fit.direction @ e1))
+    sol = least_squares(residuals, np.array([psi0]), method="lm", x_scale="jac")
+    s = s_of(float(sol.x[0]))
+    used = int(np.count_nonzero(sw > 0))
+    chi2 = float(sol.fun @ sol.fun)
+    var_psi = float(1.0 / max(float((sol.jac.T @ sol.jac)[0, 0]), 1e-30)) * (
+        max(1.0, chi2 / (used - 1)) if used > 1 else 1.0
+    )
+    t = np.cross(d, s)
+    cov_d = axis.basis.T @ axis.cov_tangent_rad2 @ axis.basis  # (3, 3)
+    cov = var_psi * np.outer(t, t) + float(s @ cov_d @ s) * np.outer(d, d)
+    return s, cov
