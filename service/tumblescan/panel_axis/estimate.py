@@ -5,10 +5,12 @@
 3. Group the lines' back-projected planes into families of parallel 3D lines (RANSAC).
 4. The axis family is the longest one along the target's elongation; its direction is the
    weighted least-squares null direction of its planes (IRLS), with a covariance.
-5. The short family (most orthogonal to the axis) gives L″, the panel normal and Table 2's
-   orthogonality.
+5. The axis is refitted with the families orthogonal to it. The wing's short edges (ends and gaps),
+   grouped by their angle about the axis, give the short axis L″ fitted ⟂ the axis (a panel frame,
+   orthogonal by construction), the panel normal, and Table 2's check from their own fit.
 6. Perspective SNR: under the threshold the view is weak perspective, answered with the IPPE
-   mirror pair from one wing's corners and the panel prior, or with the in-image angle alone.
+   mirror pair from one wing's corners (a root hidden behind the bus derived from the tip and the
+   prior) and the panel prior, or with the in-image angle alone.
 7. Frames: camera -> station ENU -> ECEF, pitch/yaw by eq. 1, σ propagated.
 """
 
@@ -328,8 +330,8 @@ def _panel(
     """The panel block. With ``constrained`` (the short axis fitted ⟂ the axis, and its (3, 3)
     covariance) the short axis is orthogonal to the reported axis by construction; without it (no
     short edges, or short edges not orthogonal to the axis within σ) it is the short edges' own fit.
-    Either way the paper's Table 2 check is between ``separate`` (the axis, without the short edges'
-    σ-free bias term) and ``short_fit`` (the short edges alone)."""
+    Either way the paper's Table 2 check is between ``separate`` (the axis, fitted without the short
+    edges) and ``short_fit`` (the short edges alone)."""
     rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
     panel = Panel(
         edge_rms_px=rms,

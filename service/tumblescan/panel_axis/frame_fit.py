@@ -1,25 +1,22 @@
-"""The panel frame: the axis and the directions orthogonal to it, fitted jointly from all their edges.
+"""The panel frame: the axis and the directions orthogonal to it.
 
 A wing is a rectangle: its long edges run along the axis ``d`` and its end edges and sub-panel gaps
-along the short direction ``s ⟂ d``; the bus edges across the axis are ⟂ ``d`` as well. Fitting
-each family on its own gives directions that are orthogonal only up to their noise (the paper's
-Table 2 check). Here the rotation is the unknown: ``d`` moves in its tangent plane (2 parameters,
-``p``) and each other family ``j`` is ``d_j = cos ψ_j·e1(d) + sin ψ_j·e2(d)``, orthogonal to ``d``
-by construction. With back-projected unit plane normals ``n_i`` (camera frame), their σ_i(d) and
-the Huber weights ``w_i`` of the separate fits, the problem is
+along the short direction ``s ⟂ d``; the bus edges across the axis are ⟂ ``d`` as well. With
+back-projected unit plane normals ``n_i`` (camera frame), their σ_i and Huber weights ``w_i``:
 
-    min over (p, ψ)  Σ_i∈axis w_i (n_i·d)²/σ_i(d)² + Σ_j Σ_k∈j w_k (n_k·d_j)²/σ_k(d_j)²
-
-(``scipy.optimize.least_squares``, Levenberg-Marquardt). With one short family this is the
-weighted least-squares rotation of the panel (3 parameters) from both edge families. Edges over
-5σ after a first solve are dropped and it is solved again. The covariance of all parameters is
-``(JᵀJ)⁻¹·max(1, χ²/dof)``; the axis block gives the axis covariance in its tangent basis and
-``∂d_j/∂(p, ψ_j)`` propagates it to each ``d_j``.
+- ``fit_panel_frame``: the axis jointly with families known to be orthogonal to it. ``d`` moves in
+  its tangent plane (2 parameters ``p``) and each family ``j`` is ``d_j = cos ψ_j·e1(d) + sin ψ_j·e2(d)``,
+  orthogonal to ``d`` by construction:
+  ``min Σ_i∈axis w_i (n_i·d)²/σ_i(d)² + Σ_j Σ_k∈j w_k (n_k·d_j)²/σ_k(d_j)²``
+  (``scipy.optimize.least_squares``, Levenberg-Marquardt); edges over 5σ after a first solve are
+  dropped and it is solved again (the joint fit pins the axis's depth tilt well enough to tell a
+  biased edge, one beside the bus, from a good one). The axis covariance is the ``p`` block of
+  ``(JᵀJ)⁻¹·max(1, χ²/dof)``.
+- ``fit_about_axis``: one family's direction ⟂ a given axis (ψ only), with its covariance.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,16 +28,10 @@ from .axis import REJECT_K, DirectionFit, PlaneObs, PlaneStack
 @dataclass(frozen=True)
 class FrameFit:
     """``axis``: the axis fit (direction, tangent basis (2, 3), covariance (2, 2) rad²);
-    ``directions``: the unit (3,) direction of each other family, ⟂ the axis;
-    ``covariances``: each one's (3, 3) covariance (rad², rank 2, in the plane ⟂ it)."""
+    ``directions``: the unit (3,) direction of each other family, ⟂ the axis."""
 
     axis: DirectionFit
     directions: list[FloatArray]
-    covariances: list[FloatArray]
-
-    def sigma_rad(self, j: int) -> float:
-        """The largest 1σ (rad) of the direction of family ``j``."""
-        return float(np.sqrt(max(np.linalg.eigvalsh(self.covariances[j]).max(), 0.0)))
 
 
 def fit_panel_frame(
@@ -97,29 +88,7 @@ def fit_panel_frame(
     cov_axis = cov_all[:2, :2] * np.outer(norms, norms)
     res_axis = residuals(x)[: len(axis_planes)]
     axis_fit = DirectionFit(d, basis, cov_axis, chi2, dof, res_axis, groups[0][1] ** 2)
-    directions, covariances = [], []
-    for j in range(len(others)):
-        idx = [0, 1, 2 + j]
-        G = _jacobian(lambda q, j=j, idx=idx: other(_with(x, idx, q), j), x[idx])  # (3, 3): ∂d_j/∂(p, ψ_j)
-        directions.append(other(x, j))
-        covariances.append(G @ cov_all[np.ix_(idx, idx)] @ G.T)
-    return FrameFit(axis_fit, directions, covariances)
-
-
-def _with(x: FloatArray, idx: list[int], q: FloatArray) -> FloatArray:
-    y = np.array(x, dtype=float)
-    y[idx] = q
-    return y
-
-
-def _jacobian(f: Callable[[FloatArray], FloatArray], x: FloatArray, h: float = 1e-7) -> FloatArray:
-    """Central-difference Jacobian (m, n) of ``f: (n,) -> (m,)`` at ``x``."""
-    cols = []
-    for k in range(len(x)):
-        step = np.zeros(len(x))
-        step[k] = h
-        cols.append((f(x + step) - f(x - step)) / (2 * h))
-    return np.column_stack(cols)
+    return FrameFit(axis_fit, [other(x, j) for j in range(len(others))])
 
 
 def fit_about_axis(axis: DirectionFit, fit: DirectionFit, planes: list[PlaneObs]) -> tuple[FloatArray, FloatArray]:
@@ -131,7 +100,9 @@ def fit_about_axis(axis: DirectionFit, fit: DirectionFit, planes: list[PlaneObs]
     from scipy.optimize import least_squares
 
     d = axis.direction
-    e1, e2 = axis.basis[0], axis.basis[1]
+    e1 = axis.basis[0] - (axis.basis[0] @ d) * d
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d, e1)
     st = PlaneStack(planes)
     sw = np.sqrt(fit.weights)
 
