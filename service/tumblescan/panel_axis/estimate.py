@@ -35,6 +35,7 @@ from .frame_fit import fit_about_axis, fit_panel_frame
 from .meta import PanelAxisInput
 from .options import EstimateOptions
 from .outputs import Frames
+from .panel_block import panel_block
 from .paper import estimate_paper
 from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
@@ -151,7 +152,7 @@ def estimate_axis(
             tilt_deg=tilt,
             sigma_tilt_deg=sigma_tilt,
         ),
-        panel=_panel(fit, separate, axis_family, short, short_fit, constrained, frames, corners),
+        panel=panel_block(fit, separate, axis_family, short, short_fit, constrained, frames, corners, weak=weak),
         segmentation=Segmentation(
             threshold=target.threshold,
             target_px=target.target_px,
@@ -315,59 +316,6 @@ def _weak_answer(
         )
     best = poses[0]
     return frames.axis(best.axis_cam, best.cov_tangent_rad2, best.basis), cands, corners
-
-
-def _panel(
-    fit: DirectionFit,
-    separate: DirectionFit,
-    family: Family,
-    short_family: Family | None,
-    short_fit: DirectionFit | None,
-    constrained: tuple[FloatArray, FloatArray] | None,
-    frames: Frames,
-    corners: FloatArray | None,
-) -> Panel:
-    """The panel block. With ``constrained`` (the short axis fitted ⟂ the axis, and its (3, 3)
-    covariance) the short axis is orthogonal to the reported axis by construction; without it (no
-    short edges, or short edges not orthogonal to the axis within σ) it is the short edges' own fit.
-    Either way the paper's Table 2 check is between ``separate`` (the axis, fitted without the short
-    edges) and ``short_fit`` (the short edges alone)."""
-    rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
-    panel = Panel(
-        edge_rms_px=rms,
-        edges_px=[e.line.endpoints_px.ravel().tolist() for e in family.edges],
-        long_edges=len(family.edges),
-        wing_corners_px=corners.tolist() if corners is not None else None,
-    )
-    if short_family is None or short_fit is None:
-        return panel
-    check, check_sigma = _orthogonality(separate, short_fit)
-    panel.table2_orthogonality_deg, panel.table2_orthogonality_sigma_deg = check, check_sigma
-    panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
-    panel.short_edges = len(short_family.edges)
-    if constrained is not None:
-        short, cov = constrained
-        panel.frame = "joint"
-        panel.short_axis_sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
-        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short))
-        panel.orthogonality_sigma_deg = 0.0
-    else:
-        short = short_fit.direction
-        panel.frame = "separate"
-        panel.short_axis_sigma_deg = float(np.degrees(short_fit.sigma_rad))
-        panel.orthogonality_deg, panel.orthogonality_sigma_deg = _orthogonality(fit, short_fit)
-    panel.short_axis = frames.direction(short)
-    n = np.cross(fit.direction, short)
-    panel.normal = frames.direction(n / np.linalg.norm(n))
-    return panel
-
-
-def _orthogonality(a: DirectionFit, b: DirectionFit) -> tuple[float, float]:
-    """``|90° − angle(a, b)|`` (deg) and its σ from both fits' covariances (``a·b`` moves the angle
-    by that much in radians)."""
-    g1, g2 = a.basis @ b.direction, b.basis @ a.direction
-    var = float(g1 @ a.cov_tangent_rad2 @ g1 + g2 @ b.cov_tangent_rad2 @ g2)
-    return abs(90.0 - angle_between_lines_deg(a.direction, b.direction)), float(np.degrees(np.sqrt(max(var, 0.0))))
 
 
 def _paper_result(
