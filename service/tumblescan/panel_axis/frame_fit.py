@@ -92,36 +92,50 @@ def fit_panel_frame(
 
 
 def fit_about_axis(axis: DirectionFit, fit: DirectionFit, planes: list[PlaneObs]) -> tuple[FloatArray, FloatArray]:
-    """A family's direction constrained ⟂ a given axis: ``s(ψ) = cos ψ·e1 + sin ψ·e2`` in the axis's
-    tangent basis, ``ψ = argmin Σ_k w_k (n_k·s)²/σ_k(s)²`` (Huber weights ``w_k`` of the family's
-    separate ``fit``, which also gives the start). Returns the unit direction (3,) and its (3, 3)
-    covariance: ``var ψ`` along ``d × s`` (from the Gauss-Newton curvature, times
-    ``max(1, χ²/dof)``) plus the axis's own uncertainty, which tips ``s`` toward ``d`` by ``s·δd``."""
+    """A family's direction constrained ⟂ a given axis ``d``: ``s(ψ) = cos ψ·e1(d) + sin ψ·e2(d)``,
+    ``ψ = argmin Σ_k w_k (n_k·s)²/σ_k(s)²`` (Huber weights ``w_k`` of the family's separate ``fit``,
+    which also gives the start). Returns the unit direction (3,) and its (3, 3) covariance:
+    ``var ψ`` along ``d × s`` (Gauss-Newton curvature times ``max(1, χ²/dof)``) plus the axis's
+    covariance carried through ``∂s/∂d`` (the fit redone about an axis moved along each tangent
+    direction: it tips ``s`` with ``d`` and shifts ψ to fit the planes again)."""
     from scipy.optimize import least_squares
 
-    d = axis.direction
-    e1 = axis.basis[0] - (axis.basis[0] @ d) * d
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(d, e1)
     st = PlaneStack(planes)
     sw = np.sqrt(fit.weights)
-
-    def s_of(psi: float) -> FloatArray:
-        return np.asarray(np.cos(psi) * e1 + np.sin(psi) * e2, dtype=float)
-
-    def residuals(p: FloatArray) -> FloatArray:
-        s = s_of(float(p[0]))
-        return np.asarray(sw * (st.N @ s) / np.sqrt(st.sigma2(s)), dtype=float)
-
-    psi0 = float(np.arctan2(fit.direction @ e2, fit.direction @ e1))
-    sol = least_squares(residuals, np.array([psi0]), method="lm", x_scale="jac")
-    s = s_of(float(sol.x[0]))
     used = int(np.count_nonzero(sw > 0))
-    chi2 = float(sol.fun @ sol.fun)
-    var_psi = float(1.0 / max(float((sol.jac.T @ sol.jac)[0, 0]), 1e-30)) * (
-        max(1.0, chi2 / (used - 1)) if used > 1 else 1.0
+    helper = axis.basis[0]
+
+    def solve(d: FloatArray, psi0: float) -> tuple[FloatArray, float, float, FloatArray]:
+        e1 = helper - (helper @ d) * d
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(d, e1)
+
+        def residuals(p: FloatArray) -> FloatArray:
+            s = np.cos(p[0]) * e1 + np.sin(p[0]) * e2
+            return np.asarray(sw * (st.N @ s) / np.sqrt(st.sigma2(s)), dtype=float)
+
+        sol = least_squares(residuals, np.array([psi0]), method="lm", x_scale="jac")
+        psi = float(sol.x[0])
+        scale = max(1.0, float(sol.fun @ sol.fun) / (used - 1)) if used > 1 else 1.0
+        var_psi = scale / max(float((sol.jac.T @ sol.jac)[0, 0]), 1e-30)
+        return np.cos(psi) * e1 + np.sin(psi) * e2, psi, var_psi, e1
+
+    d = axis.direction
+    e1 = helper - (helper @ d) * d
+    e1 /= np.linalg.norm(e1)
+    psi0 = float(np.arctan2(fit.direction @ np.cross(d, e1), fit.direction @ e1))
+    s, psi, var_psi, _ = solve(d, psi0)
+    h = 1e-6
+    G = np.column_stack(
+        [
+            (solve(_unit(d + h * b), psi)[0] - solve(_unit(d - h * b), psi)[0]) / (2 * h)
+            for b in axis.basis  # (3, 2): ∂s/∂(tangent of d)
+        ]
     )
     t = np.cross(d, s)
-    cov_d = axis.basis.T @ axis.cov_tangent_rad2 @ axis.basis  # (3, 3)
-    cov = var_psi * np.outer(t, t) + float(s @ cov_d @ s) * np.outer(d, d)
+    cov = var_psi * np.outer(t, t) + G @ axis.cov_tangent_rad2 @ G.T
     return s, cov
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    return np.asarray(v / np.linalg.norm(v), dtype=float)
