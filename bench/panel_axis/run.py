@@ -72,6 +72,7 @@ def run_one(view: SimulatedView, method: str, *, drop_prior: bool = False) -> di
         "t2": r.panel.table2_orthogonality_deg,
         "t2_sigma": r.panel.table2_orthogonality_sigma_deg,
         "frame": r.panel.frame,
+        "warnings": list(r.warnings),
     }
     if r.panel.short_axis is not None and "panel_normal_camera" in view.truth:
         short_true = np.cross(view.truth["axis_camera"], view.truth["panel_normal_camera"])
@@ -165,7 +166,9 @@ def ground_rows(cases: list[dict[str, Any]]) -> list[list[str]]:
             [
                 method,
                 f"{amb}/{n}",
-                f"{len(best)}/{n}" if method == "ours" else "-",
+                f"{len(best)}/{n} ({sum('wing_root_hidden' in r.get('warnings', []) for r in res)} with a hidden root)"
+                if method == "ours"
+                else "-",
                 f"{_q(best, 50):.2f} / {max(best):.2f} ({len(best)})" if best else "-",
                 f"{_q(twin, 50):.1f}" if twin else "-",
                 f"{_q(err, 50):.1f} / {max(err):.1f}" if err else "-",
