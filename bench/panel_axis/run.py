@@ -130,8 +130,8 @@ def near_rows(cases: list[dict[str, Any]], noisy: bool) -> list[list[str]]:
         else:
             row += ["-", "-"]
         orth = [r["orth"] for r, _ in ok if r.get("orth") is not None]
-        joint = sum(r.get("frame") == "joint" for r, _ in ok)
-        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)}, joint {joint})"]
+        constrained = sum(r.get("frame") == "constrained" for r, _ in ok)
+        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)}, constrained {constrained})"]
         short = [r["short_err"] for r, _ in ok if "short_err" in r]
         sz = [r["short_err"] / r["short_sigma"] for r, _ in ok if "short_err" in r and r.get("short_sigma")]
         row += [
@@ -237,7 +237,7 @@ def main() -> None:
         )  # fmt: skip
     near_header = [
         "pipeline", "answered", "median (deg)", "p90", "max", "within max(thr, 3sigma_CRLB)",
-        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n, joint frames)",
+        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n, constrained frames)",
         "short axis err median / p90", "Table 2 check (separate fits) median / p90", "check / its sigma median / p90",
         "ms/image",
     ]  # fmt: skip

@@ -106,7 +106,7 @@ def test_the_short_axis_of_a_near_view_is_the_wings(near_bus_across: Path) -> No
     truth = json.loads((near_bus_across / "truth.json").read_text())
     r = run(load_input(near_bus_across / "meta.json"))
     assert r.axis is not None and r.panel.short_axis is not None and r.panel.short_axis_sigma_deg is not None
-    assert r.panel.frame == "joint" and r.panel.orthogonality_deg is not None and r.panel.orthogonality_deg < 1e-9
+    assert r.panel.frame == "constrained" and r.panel.orthogonality_deg is not None and r.panel.orthogonality_deg < 1e-9
     short_true = np.cross(truth["axis_camera"], truth["panel_normal_camera"])
     err = _angle_deg(r.panel.short_axis.camera, short_true)
     assert err <= max(0.5, 3 * r.panel.short_axis_sigma_deg) and err < 5.0

@@ -57,7 +57,7 @@ class Panel(_Model):
     short_axis: Direction | None = None
     short_axis_sigma_deg: float | None = None
     normal: Direction | None = None
-    frame: Literal["joint", "separate"] | None = None
+    frame: Literal["constrained", "separate"] | None = None
     orthogonality_deg: float | None = None
     orthogonality_sigma_deg: float | None = None
     table2_orthogonality_deg: float | None = None

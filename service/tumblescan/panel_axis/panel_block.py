@@ -46,7 +46,7 @@ def panel_block(
     panel.table2_orthogonality_deg, panel.table2_orthogonality_sigma_deg = check, check_sigma
     if constrained is not None:
         short, cov = constrained
-        panel.frame = "joint"
+        panel.frame = "constrained"
         panel.short_axis_sigma_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))))
         panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short))
         panel.orthogonality_sigma_deg = 0.0

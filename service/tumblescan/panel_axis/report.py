@@ -126,7 +126,7 @@ def build_report(
         [
             "orthogonality (deg)",
             _f(panel.get("orthogonality_deg")),
-            "|90° - angle(axis, short axis)| as reported (0 when fitted jointly)",
+            "|90° - angle(axis, short axis)| as reported (0 when fitted ⟂ the axis)",
         ],
         [
             "Table 2 check (deg)",
