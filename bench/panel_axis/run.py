@@ -69,8 +69,15 @@ def run_one(view: SimulatedView, method: str, *, drop_prior: bool = False) -> di
         "ms": ms,
         "ambiguous": r.ambiguous,
         "orth": r.panel.orthogonality_deg,
-        "orth_sigma": r.panel.orthogonality_sigma_deg,
+        "t2": r.panel.table2_orthogonality_deg,
+        "t2_sigma": r.panel.table2_orthogonality_sigma_deg,
+        "frame": r.panel.frame,
+        "warnings": list(r.warnings),
     }
+    if r.panel.short_axis is not None and "panel_normal_camera" in view.truth:
+        short_true = np.cross(view.truth["axis_camera"], view.truth["panel_normal_camera"])
+        out["short_err"] = _angle_deg(r.panel.short_axis.camera, short_true)
+        out["short_sigma"] = r.panel.short_axis_sigma_deg
     if r.axis is not None:
         out["err"] = _angle_deg(r.axis.camera, truth["axis_camera"])
         out["sigma"] = r.axis.sigma_deg
@@ -123,9 +130,23 @@ def near_rows(cases: list[dict[str, Any]], noisy: bool) -> list[list[str]]:
         else:
             row += ["-", "-"]
         orth = [r["orth"] for r, _ in ok if r.get("orth") is not None]
-        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)})"]
-        oz = [r["orth"] / r["orth_sigma"] for r, _ in ok if r.get("orth") is not None and r.get("orth_sigma")]
-        row += [f"{_q(oz, 50):.2f} / {_q(oz, 90):.2f}" if oz else "-", f"{_q([r['ms'] for r in res], 50):.0f}"]
+        constrained = sum(r.get("frame") == "constrained" for r, _ in ok)
+        row += [f"{_q(orth, 50):.3f} / {_q(orth, 90):.3f} ({len(orth)}, constrained {constrained})"]
+        short = [r["short_err"] for r, _ in ok if "short_err" in r]
+        sz = [r["short_err"] / r["short_sigma"] for r, _ in ok if "short_err" in r and r.get("short_sigma")]
+        row += [
+            f"{_q(short, 50):.3f} / {_q(short, 90):.3f}"
+            + (f" (> 3 sigma {100 * np.mean(np.array(sz) > 3):.0f} %)" if sz else "")
+            if short
+            else "-"
+        ]
+        if method == "ours":
+            t2 = [r["t2"] for r, _ in ok if r.get("t2") is not None]
+            oz = [r["t2"] / r["t2_sigma"] for r, _ in ok if r.get("t2") is not None and r.get("t2_sigma")]
+            row += [f"{_q(t2, 50):.3f} / {_q(t2, 90):.3f}", f"{_q(oz, 50):.2f} / {_q(oz, 90):.2f}" if oz else "-"]
+        else:
+            row += ["-", "-"]
+        row += [f"{_q([r['ms'] for r in res], 50):.0f}"]
         rows.append(row)
     return rows
 
@@ -145,7 +166,9 @@ def ground_rows(cases: list[dict[str, Any]]) -> list[list[str]]:
             [
                 method,
                 f"{amb}/{n}",
-                f"{len(best)}/{n}" if method == "ours" else "-",
+                f"{len(best)}/{n} ({sum('wing_root_hidden' in r.get('warnings', []) for r in res)} with a hidden root)"
+                if method == "ours"
+                else "-",
                 f"{_q(best, 50):.2f} / {max(best):.2f} ({len(best)})" if best else "-",
                 f"{_q(twin, 50):.1f}" if twin else "-",
                 f"{_q(err, 50):.1f} / {max(err):.1f}" if err else "-",
@@ -214,7 +237,9 @@ def main() -> None:
         )  # fmt: skip
     near_header = [
         "pipeline", "answered", "median (deg)", "p90", "max", "within max(thr, 3sigma_CRLB)",
-        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n)", "orth / its sigma median / p90", "ms/image",
+        "err > 3 sigma", "err > 5 sigma", "orthogonality median / p90 (n, constrained frames)",
+        "short axis err median / p90", "Table 2 check (separate fits) median / p90", "check / its sigma median / p90",
+        "ms/image",
     ]  # fmt: skip
     ground_header = [
         "pipeline", "ambiguous", "with candidates", "best candidate median / max (deg)", "twin median",

@@ -30,3 +30,15 @@ def near_noisy(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def ground(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return view_dir(tmp_path_factory, "ground", 4, regime="ground", noise=True)
+
+
+@pytest.fixture(scope="session")
+def near_bus_across(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A near view whose longest family across the axis is the bus's, not the wing's ends."""
+    return view_dir(tmp_path_factory, "near_bus_across", 1057, regime="near", noise=True)
+
+
+@pytest.fixture(scope="session")
+def ground_roots_hidden(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A ground view with both wings' roots hidden behind the bus."""
+    return view_dir(tmp_path_factory, "ground_roots_hidden", 1004, regime="ground", noise=True)

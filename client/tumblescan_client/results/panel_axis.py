@@ -55,9 +55,13 @@ class Observability(_Model):
 
 class Panel(_Model):
     short_axis: Direction | None = None
+    short_axis_sigma_deg: float | None = None
     normal: Direction | None = None
+    frame: Literal["constrained", "separate"] | None = None
     orthogonality_deg: float | None = None
     orthogonality_sigma_deg: float | None = None
+    table2_orthogonality_deg: float | None = None
+    table2_orthogonality_sigma_deg: float | None = None
     edge_rms_px: float | None = None
     edges_px: Mat = []
     short_edges_px: Mat = []

@@ -83,7 +83,7 @@ class DirectionFit:
         return float(np.sqrt(np.linalg.eigvalsh(self.cov_tangent_rad2).max()))
 
 
-class _Stack:
+class PlaneStack:
     """The planes' arrays, for vectorised residuals."""
 
     def __init__(self, planes: list[PlaneObs]) -> None:
@@ -102,7 +102,7 @@ def fit_direction(
 ) -> DirectionFit:
     """The common direction of the planes' lines (see the module docstring); needs 2 planes or more.
     With ``reject``, planes over 5σ after the fit are dropped and the fit redone (kept when 3 remain)."""
-    st = _Stack(planes)
+    st = PlaneStack(planes)
     N = st.N
     d = np.linalg.svd(N)[2][-1]
     w = np.ones(len(planes))
@@ -157,66 +157,6 @@ def angle_between_lines_deg(a: FloatArray, b: FloatArray) -> float:
     """Angle (deg) between two lines (directions up to sign), in [0, 90]."""
     c = abs(float(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b))))
     return float(np.degrees(np.arccos(min(1.0, c))))
-
-
-def fit_with_orthogonal(
-    axis: DirectionFit, axis_planes: list[PlaneObs], others: list[tuple[DirectionFit, list[PlaneObs]]]
-) -> DirectionFit:
-    """Refit the axis together with families known to be orthogonal to it (the wing ends, the bus
-    edges across it): minimise ``Σ_i w_i (n_i·d)²/σ_i² + Σ_j Σ_k w_k (n_k·d_j)²/σ_k²`` subject to
-    ``d_j ⟂ d`` (``scipy.optimize.least_squares``), with ``d_j = cos ψ_j·e1(d) + sin ψ_j·e2(d)``.
-    The Huber weights of the separate fits are kept; after a first solve, edges over 5σ are dropped
-    and the problem solved again (the joint fit pins the axis's depth tilt well enough to tell a
-    biased edge, an edge beside the bus, from a good one). The covariance is the axis block of
-    ``(JᵀJ)⁻¹·max(1, χ²/dof)`` in the tangent basis."""
-    from scipy.optimize import least_squares
-
-    d0 = axis.direction
-    basis0 = axis.basis
-
-    def frame(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        d = d0 + p[0] * basis0[0] + p[1] * basis0[1]
-        d = d / np.linalg.norm(d)
-        helper = basis0[0]
-        e1 = helper - (helper @ d) * d
-        e1 /= np.linalg.norm(e1)
-        return d, e1, np.cross(d, e1)
-
-    groups = [(_Stack(axis_planes), np.sqrt(axis.weights))] + [(_Stack(pl), np.sqrt(f.weights)) for f, pl in others]
-    sizes = np.cumsum([0] + [len(st.N) for st, _ in groups])
-
-    def residuals(p: FloatArray) -> FloatArray:
-        d, e1, e2 = frame(p)
-        out = []
-        for j, (st, sw) in enumerate(groups):
-            dj = d if j == 0 else np.cos(p[1 + j]) * e1 + np.sin(p[1 + j]) * e2
-            out.append(sw * (st.N @ dj) / np.sqrt(st.sigma2(dj)))
-        return np.concatenate(out)
-
-    _, e1, e2 = frame(np.zeros(2))
-    psi0 = [float(np.arctan2(f.direction @ e2, f.direction @ e1)) for f, _ in others]
-    sol = least_squares(residuals, np.concatenate([[0.0, 0.0], psi0]), method="lm", x_scale="jac")
-    big = np.abs(sol.fun) > REJECT_K
-    if big.any() and np.count_nonzero(~big[: sizes[1]]) >= 3:
-        for j, (_, sw) in enumerate(groups):
-            sw[big[sizes[j] : sizes[j + 1]]] = 0.0
-        sol = least_squares(residuals, sol.x, method="lm", x_scale="jac")
-    d, _, _ = frame(sol.x)
-    J = sol.jac
-    r = sol.fun
-    n_par = len(sol.x)
-    used = int(np.count_nonzero(np.concatenate([sw for _, sw in groups]) > 0))
-    dof = max(used - n_par, 1)
-    chi2 = float(r @ r)
-    cov_all = np.linalg.pinv(J.T @ J) * max(1.0, chi2 / dof)
-    # The parameters move d along basis0 (to first order); express them in a basis ⟂ d.
-    basis = np.array([b - (b @ d) * d for b in basis0])
-    cov = cov_all[:2, :2]
-    norms = np.linalg.norm(basis, axis=1)
-    basis = basis / norms[:, None]
-    cov = cov * np.outer(norms, norms)
-    res_axis = residuals(sol.x)[: len(axis_planes)]
-    return DirectionFit(d, basis, cov, chi2, dof, res_axis, groups[0][1] ** 2)
 
 
 # Systematic edge errors (PSF, shading, a thin side face) that do not average out along an edge:

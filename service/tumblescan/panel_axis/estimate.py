@@ -5,10 +5,12 @@
 3. Group the lines' back-projected planes into families of parallel 3D lines (RANSAC).
 4. The axis family is the longest one along the target's elongation; its direction is the
    weighted least-squares null direction of its planes (IRLS), with a covariance.
-5. The short family (most orthogonal to the axis) gives L″, the panel normal and Table 2's
-   orthogonality.
+5. The axis is refitted with the families orthogonal to it. The wing's short edges (ends and gaps),
+   grouped by their angle about the axis, give the short axis L″ fitted ⟂ the axis (a panel frame,
+   orthogonal by construction), the panel normal, and Table 2's check from their own fit.
 6. Perspective SNR: under the threshold the view is weak perspective, answered with the IPPE
-   mirror pair from one wing's corners and the panel prior, or with the in-image angle alone.
+   mirror pair from one wing's corners (a root hidden behind the bus derived from the tip and the
+   prior) and the panel prior, or with the in-image angle alone.
 7. Frames: camera -> station ENU -> ECEF, pitch/yaw by eq. 1, σ propagated.
 """
 
@@ -25,18 +27,20 @@ from .axis import (
     PlaneObs,
     angle_between_lines_deg,
     fit_direction,
-    fit_with_orthogonal,
     with_edge_bias,
 )
 from .edges import Edge, Family, find_edges, group_families
 from .errors import DegenerateViewError, DepthUnobservableError, TooFewEdgesError
+from .frame_fit import fit_about_axis, fit_panel_frame
 from .meta import PanelAxisInput
 from .options import EstimateOptions
 from .outputs import Frames
+from .panel_block import panel_block
 from .paper import estimate_paper
 from .result import Axis, Candidate, Observability, Panel, PanelAxisResult, Segmentation
 from .segment import Target, find_target
-from .weak import best_wing, ippe_candidates, wing_corners
+from .short_family import short_family
+from .weak import best_wing, hidden_root_corners, ippe_candidates, wing_corners
 
 MIN_ELONGATION = 2.0  # under it no wing is seen along the axis (end-on, or edge-on and unlit)
 MIN_TIP_WIDTH_PX = 4.0  # under it the panel is seen edge-on
@@ -94,15 +98,23 @@ def estimate_axis(
     extent = _extent(axis_family)
     if extent < MIN_AXIS_EXTENT_PX:
         raise DegenerateViewError(f"image: the projected axis is {extent:.0f} px long (30 px needed)", field="image")
-    fit = fit_direction([e.plane for e in axis_family.edges])
-    # 5. The short family and orthogonality (separate fits), then the axis refitted with every
-    # family that is orthogonal to it within its σ.
-    short_family, short_fit = _short_family(families, axis_family, fit.direction)
-    orthogonal = _orthogonal_families(families, axis_family, fit)
-    separate = fit
+    axis_planes = [e.plane for e in axis_family.edges]
+    fit = fit_direction(axis_planes)
+    # 5. The panel frame. The axis is refitted with the families found orthogonal to it (bus edges
+    # across it; they also expose a biased axis edge). The wing's short edges are then found about
+    # that axis, and when their own fit is orthogonal to it within σ, the short axis is fitted with
+    # the axis held (orthogonal to it by construction). The Table 2 check is between that axis and the
+    # short edges' own fit.
+    orthogonal = _orthogonal_families(families, axis_family, fit, set())
     if orthogonal:
-        fit = fit_with_orthogonal(fit, [e.plane for e in axis_family.edges], orthogonal)
-    fit = with_edge_bias(fit, [e.plane for e in axis_family.edges], [e.line.half_length_px for e in axis_family.edges])
+        fit = fit_panel_frame(fit, axis_planes, _planes(orthogonal)).axis
+    separate = fit
+    short = short_family(edges, axis_family, fit.direction)
+    short_fit = fit_direction([e.plane for e in short.edges], reject=True) if short is not None else None
+    fit = with_edge_bias(fit, axis_planes, [e.line.half_length_px for e in axis_family.edges])
+    constrained = None
+    if short is not None and short_fit is not None and _orthogonal_within_sigma(separate, short_fit):
+        constrained = fit_about_axis(fit, short_fit, [e.plane for e in short.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
     a_img = axis_family.image_direction()
@@ -118,7 +130,9 @@ def estimate_axis(
     corners = None
     if weak:
         warnings.append("weak_perspective")
-        axis, candidates, corners = _weak_answer(meta, axis_family, edges, camera, frames, rng, options, warnings)
+        axis, candidates, corners = _weak_answer(
+            meta, axis_family, edges, target, camera, frames, rng, options, warnings
+        )
     else:
         axis = frames.axis(fit.direction, fit.cov_tangent_rad2, fit.basis)
     image_angle = float(np.degrees(np.arctan2(a_img[1], a_img[0])) % 180.0)
@@ -138,7 +152,7 @@ def estimate_axis(
             tilt_deg=tilt,
             sigma_tilt_deg=sigma_tilt,
         ),
-        panel=_panel(separate, axis_family, short_family, short_fit, frames, corners),
+        panel=panel_block(fit, separate, axis_family, short, short_fit, constrained, frames, corners, weak=weak),
         segmentation=Segmentation(
             threshold=target.threshold,
             target_px=target.target_px,
@@ -173,38 +187,32 @@ def _extent(family: Family) -> float:
     return float(np.ptp(s))
 
 
-def _short_family(
-    families: list[Family], axis_family: Family, d: FloatArray
-) -> tuple[Family | None, DirectionFit | None]:
-    """The family within 10° of orthogonal to the axis with the most edge length (the wing ends
-    and sub-panel gaps, usually), fitted with edges over 5σ dropped."""
-    best = None
-    for fam in families:
-        if fam is axis_family or len(fam.edges) < 2:
-            continue
-        if angle_between_lines_deg(fam.direction, d) < 80.0:
-            continue
-        if best is None or fam.total_length_px > best.total_length_px:
-            best = fam
-    if best is None:
-        return None, None
-    return best, fit_direction([e.plane for e in best.edges], reject=True)
+def _orthogonal_within_sigma(fit: DirectionFit, other: DirectionFit) -> bool:
+    """Whether two separately fitted directions are orthogonal within 3σ (both fits) plus 0.5° (an
+    allowance for edge-model bias, which the fits' σ do not hold)."""
+    tol = np.radians(0.5) + 3 * np.hypot(fit.sigma_rad, other.sigma_rad)
+    return bool(abs(float(other.direction @ fit.direction)) < np.sin(tol))
 
 
 def _orthogonal_families(
-    families: list[Family], axis_family: Family, fit: DirectionFit
-) -> list[tuple[DirectionFit, list[PlaneObs]]]:
-    """Families of 3+ edges whose direction is orthogonal to the axis within 3σ (both fits) plus 0.5°
-    (two edges always fit a direction exactly, so a pair cannot show it is a family)."""
+    families: list[Family], axis_family: Family, fit: DirectionFit, exclude: set[int]
+) -> list[tuple[DirectionFit, list[Edge]]]:
+    """Families of 3+ edges (two edges always fit a direction exactly, so a pair cannot show it is
+    a family), without the edges whose id is in ``exclude``, orthogonal to the axis within σ
+    (``_orthogonal_within_sigma``), each with its separate fit."""
     out = []
     for fam in families:
-        if fam is axis_family or len(fam.edges) < 3:
+        kept = [e for e in fam.edges if id(e) not in exclude]
+        if fam is axis_family or len(kept) < 3:
             continue
-        f2 = fit_direction([e.plane for e in fam.edges])
-        tol = np.radians(0.5) + 3 * np.hypot(fit.sigma_rad, f2.sigma_rad)
-        if abs(float(f2.direction @ fit.direction)) < np.sin(tol):
-            out.append((f2, [e.plane for e in fam.edges]))
+        f2 = fit_direction([e.plane for e in kept])
+        if _orthogonal_within_sigma(fit, f2):
+            out.append((f2, kept))
     return out
+
+
+def _planes(groups: list[tuple[DirectionFit, list[Edge]]]) -> list[tuple[DirectionFit, list[PlaneObs]]]:
+    return [(f, [e.plane for e in edges]) for f, edges in groups]
 
 
 def _perspective_snr(family: Family, a_img: FloatArray, camera: PinholeCamera) -> float:
@@ -248,6 +256,7 @@ def _weak_answer(
     meta: PanelAxisInput,
     family: Family,
     edges: list[Edge],
+    target: Target,
     camera: PinholeCamera,
     frames: Frames,
     rng: np.random.Generator,
@@ -265,7 +274,14 @@ def _weak_answer(
         return None, [], None
     assert meta.prior is not None and meta.prior.panel_length_m is not None and meta.prior.panel_width_m is not None
     L, W = meta.prior.panel_length_m, meta.prior.panel_width_m
-    found = best_wing(wing_corners(family, edges), L, W, camera, meta.prior.range_m)
+    range_m = meta.prior.range_m
+    found = best_wing(wing_corners(family, edges), L, W, camera, range_m)
+    if found is None and range_m is not None:
+        # A wing's root is often hidden behind the bus: its corners then come from the tip's and the
+        # prior. Tried only when no set of four seen corners fits: near a face-on short edge the
+        # derived root is sensitive to the tip's width, and a seen root is better.
+        hidden = hidden_root_corners(family, edges, target.mask, L, W, camera.focal_px / range_m)
+        found = best_wing(hidden, L, W, camera, range_m)
     if found is None:
         if options.require_axis:
             raise DepthUnobservableError(
@@ -273,12 +289,15 @@ def _weak_answer(
             )
         warnings.append("wing_corners_not_found")
         return None, [], None
-    corners, sigma_px, fit_px = found
+    corner_set, fit_px = found
+    corners = corner_set.corners_px
     if fit_px > MAX_CORNER_FIT_PX:
         warnings.append("wing_corners_misfit")
+    if corner_set.rebuild is not None:
+        warnings.append("wing_root_hidden")
     # A rectangle that fits the corners worse than their noise says the corners are off by about
     # that much: the Monte Carlo uses the larger of the two.
-    poses = ippe_candidates(corners, L, W, camera, max(sigma_px, fit_px), rng)
+    poses = ippe_candidates(corner_set, L, W, camera, max(corner_set.sigma_px, fit_px), rng)
     if not poses:
         return None, [], corners
     cands = []
@@ -297,34 +316,6 @@ def _weak_answer(
         )
     best = poses[0]
     return frames.axis(best.axis_cam, best.cov_tangent_rad2, best.basis), cands, corners
-
-
-def _panel(
-    fit: DirectionFit,
-    family: Family,
-    short_family: Family | None,
-    short_fit: DirectionFit | None,
-    frames: Frames,
-    corners: FloatArray | None,
-) -> Panel:
-    rms = float(np.sqrt(np.mean([e.line.sigma_px**2 for e in family.edges])))
-    panel = Panel(
-        edge_rms_px=rms,
-        edges_px=[e.line.endpoints_px.ravel().tolist() for e in family.edges],
-        long_edges=len(family.edges),
-        wing_corners_px=corners.tolist() if corners is not None else None,
-    )
-    if short_family is not None and short_fit is not None:
-        panel.short_axis = frames.direction(short_fit.direction)
-        panel.normal = frames.direction(np.cross(fit.direction, short_fit.direction))
-        panel.orthogonality_deg = abs(90.0 - angle_between_lines_deg(fit.direction, short_fit.direction))
-        # σ of d·d_short from both fits' covariances (the angle moves by that much in radians).
-        g1, g2 = fit.basis @ short_fit.direction, short_fit.basis @ fit.direction
-        var = float(g1 @ fit.cov_tangent_rad2 @ g1 + g2 @ short_fit.cov_tangent_rad2 @ g2)
-        panel.orthogonality_sigma_deg = float(np.degrees(np.sqrt(max(var, 0.0))))
-        panel.short_edges_px = [e.line.endpoints_px.ravel().tolist() for e in short_family.edges]
-        panel.short_edges = len(short_family.edges)
-    return panel
 
 
 def _paper_result(

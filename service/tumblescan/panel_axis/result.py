@@ -58,10 +58,19 @@ class Observability(_Model):
 
 
 class Panel(_Model):
+    """``short_axis`` (wing ends, sub-panel gaps) and ``normal``; ``frame`` says how the short axis
+    was fitted: ``constrained`` ⟂ the reported axis (orthogonal to it by construction, so ``orthogonality_deg``
+    is 0) or ``separate`` (its edges disagree with a right angle). ``table2_orthogonality_deg`` is
+    the paper's Table 2 check between the two families' separate fits, with its σ."""
+
     short_axis: Direction | None = None
+    short_axis_sigma_deg: float | None = None
     normal: Direction | None = None
+    frame: Literal["constrained", "separate"] | None = None
     orthogonality_deg: float | None = None
     orthogonality_sigma_deg: float | None = None
+    table2_orthogonality_deg: float | None = None
+    table2_orthogonality_sigma_deg: float | None = None
     edge_rms_px: float | None = None
     edges_px: Mat = []
     short_edges_px: Mat = []

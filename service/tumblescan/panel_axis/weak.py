@@ -8,6 +8,7 @@ corners are where the wing's two long edges (rails) meet its end edges.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,21 @@ from .edges import Edge, Family
 RAIL_TOLERANCE_PX = 2.5
 END_SEARCH_PX = 6.0
 MONTE_CARLO = 40
+MAX_TIP_SCALE = 1.1  # a tip over 1.1x the prior's width at the prior's range cannot be the wing's tip
+MIN_ROOT_SCALE = 0.05  # projected over true wing length under which the tip cannot be a wing's
+ROOT_MIN_HIDDEN_PX = 3.0  # a root this far beyond the visible rail ends must be hidden by the target
+
+
+@dataclass(frozen=True)
+class CornerSet:
+    """A wing's 4 image corners (4, 2) px, ordered rail A start/end, rail B end/start (along the
+    axis family's image direction), and their σ (px). ``rebuild`` is set when two corners are derived
+    from the other two (a root hidden behind the bus): it maps perturbed corners to a consistent set,
+    so the Monte Carlo perturbs what was measured."""
+
+    corners_px: FloatArray
+    sigma_px: float
+    rebuild: Callable[[FloatArray], FloatArray | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -34,10 +50,9 @@ class PoseCandidate:
     basis: FloatArray
 
 
-def wing_corners(family: Family, edges: list[Edge]) -> list[tuple[FloatArray, float]]:
-    """Candidate corner sets (4, 2) of a wing, each ordered rail A start/end, rail B end/start
-    (along the axis family's image direction), with their σ (px), most likely first: the longest
-    rails (a wing's long edges) and their longest covered intervals first."""
+def wing_corners(family: Family, edges: list[Edge]) -> list[CornerSet]:
+    """Candidate corner sets of a wing (see ``CornerSet``), most likely first: the longest rails (a
+    wing's long edges) and their longest covered intervals first."""
     a = family.image_direction()
     b = np.array([-a[1], a[0]])
     rails = _rails(family.edges, b)
@@ -68,37 +83,151 @@ def wing_corners(family: Family, edges: list[Edge]) -> list[tuple[FloatArray, fl
                             _corner(line_b, ib[0], a, cross),
                         ]
                     )
-                    out.append((corners, sigma))
+                    out.append(CornerSet(corners, sigma))
     return out
 
 
+def hidden_root_corners(
+    family: Family,
+    edges: list[Edge],
+    mask: np.ndarray,
+    length_m: float,
+    width_m: float,
+    px_per_m: float,
+) -> list[CornerSet]:
+    """Corner sets of wings whose root (the end at the bus) is hidden behind the bus, in the order of
+    ``wing_corners``. The tip's two corners are measured; the root's are derived from them, the
+    rails' image direction ``a`` and the prior (a scaled orthographic view at ``px_per_m`` = f/range,
+    which weak perspective is). With the tip edge's image vector ``w`` and ``e = w/(px_per_m·W)``,
+    the projected unit axis is ``x·a`` and the unit short direction ``e``; both are columns of a
+    rotation, so ``|e|² + e_z² = 1``, ``x² + d_z² = 1`` and ``x(a·e) + d_z e_z = 0``, whence
+    ``x² = (1 − |e|²)/(1 − |e|² + (a·e)²)`` and the root lies ``x·px_per_m·L`` px from the tip. A
+    set is kept when the root is not short of the visible rail ends and, where it lies beyond them,
+    the target (the bus) covers it, as it must if it is hidden. ``mask`` (H, W) bool: the target."""
+    a = family.image_direction()
+    b = np.array([-a[1], a[0]])
+    rails = _rails(family.edges, b)
+    rails.sort(key=lambda r: -sum(e.length_px for e in r))
+    ends = np.array([a @ p for e in family.edges for p in e.line.endpoints_px])
+    mid = float(ends.min() + ends.max()) / 2  # the bus is between the wings
+    tol = 0.03 * float(np.ptp(ends))
+    members = {id(e) for e in family.edges}
+    cross = [e for e in edges if id(e) not in members and _angle_diff(e, a) > np.radians(20)]
+    out = []
+    for ka, rail_a in enumerate(rails[:3]):
+        for rail_b in rails[ka + 1 : 4]:
+            if abs(_offset(rail_b, b) - _offset(rail_a, b)) <= 3.0:
+                continue
+            line_a, line_b = _rail_line(rail_a), _rail_line(rail_b)
+            sigma = max(0.3, 2.0 * float(np.median([e.line.sigma_px for e in rail_a + rail_b])))
+            for ia in sorted(_merged(rail_a, a, tol), key=lambda iv: iv[0] - iv[1]):
+                for ib in sorted(_merged(rail_b, a, tol), key=lambda iv: iv[0] - iv[1]):
+                    overlap = min(ib[1], ia[1]) - max(ib[0], ia[0])
+                    if overlap < 0.5 * min(ia[1] - ia[0], ib[1] - ib[0]) or min(ia[1] - ia[0], ib[1] - ib[0]) < 10:
+                        continue
+                    # Both tips on one side of the bus: the ends farther from the middle.
+                    side = np.sign((ia[0] + ia[1]) / 2 - mid)
+                    if side == 0 or side != np.sign((ib[0] + ib[1]) / 2 - mid):
+                        continue
+                    hi = side > 0
+                    tip_a = _corner(line_a, ia[1] if hi else ia[0], a, cross)
+                    tip_b = _corner(line_b, ib[1] if hi else ib[0], a, cross)
+                    toward_root = -side * a
+
+                    def rebuild(c: FloatArray, hi: bool = hi, r: FloatArray = toward_root) -> FloatArray | None:
+                        ta, tb = (c[1], c[2]) if hi else (c[0], c[3])
+                        return _with_root(ta, tb, a, r, hi, length_m, width_m, px_per_m)
+
+                    corners = _with_root(tip_a, tip_b, a, toward_root, hi, length_m, width_m, px_per_m)
+                    if corners is None:
+                        continue
+                    root_a, root_b = (corners[0], corners[3]) if hi else (corners[1], corners[2])
+                    seen_a = ia[0] if hi else ia[1]
+                    seen_b = ib[0] if hi else ib[1]
+                    length_px = float(np.linalg.norm(root_a - tip_a))
+                    if not all(
+                        _root_plausible(root, seen, a, side, mask, length_px)
+                        for root, seen in ((root_a, seen_a), (root_b, seen_b))
+                    ):
+                        continue
+                    out.append(CornerSet(corners, sigma, rebuild))
+    return out
+
+
+def _with_root(
+    tip_a: FloatArray,
+    tip_b: FloatArray,
+    a: FloatArray,
+    toward_root: FloatArray,
+    hi: bool,
+    length_m: float,
+    width_m: float,
+    px_per_m: float,
+) -> FloatArray | None:
+    """The 4 corners (ordered as in ``CornerSet``) of the wing with tip corners ``tip_a`` (rail A)
+    and ``tip_b`` (rail B), its root derived as in ``hidden_root_corners``; None when the tip is
+    wider than the prior allows."""
+    e = (tip_b - tip_a) / (px_per_m * width_m)
+    q = 1.0 - float(e @ e)
+    if q < 1.0 - MAX_TIP_SCALE**2:
+        return None
+    q = max(q, 0.0)
+    ae2 = float(a @ e) ** 2
+    x = 1.0 if q + ae2 < 1e-12 else float(np.sqrt(q / (q + ae2)))
+    if x < MIN_ROOT_SCALE:  # the axis along the line of sight: no wing would be seen
+        return None
+    step = x * px_per_m * length_m * toward_root
+    root_a, root_b = tip_a + step, tip_b + step
+    if hi:
+        return np.array([root_a, tip_a, tip_b, root_b])
+    return np.array([tip_a, root_a, root_b, tip_b])
+
+
+def _root_plausible(
+    root: FloatArray, seen_end: float, a: FloatArray, side: float, mask: np.ndarray, length_px: float
+) -> bool:
+    """The root is not short of the rail's visible end (``seen_end``, along ``a``; the root is on the
+    ``-side`` of the tip) by more than 3 px or 5 % of the wing's ``length_px``, and when it is beyond
+    it by more than ``ROOT_MIN_HIDDEN_PX``, the target covers it within 2 px (what hides it)."""
+    beyond = side * (seen_end - float(a @ root))  # > 0: the root lies past the visible end
+    if beyond < -max(ROOT_MIN_HIDDEN_PX, 0.05 * length_px):
+        return False
+    if beyond <= ROOT_MIN_HIDDEN_PX:
+        return True
+    u, v = round(float(root[0])), round(float(root[1]))
+    H, W = mask.shape
+    if not (0 <= u < W and 0 <= v < H):
+        return False
+    return bool(mask[max(v - 2, 0) : v + 3, max(u - 2, 0) : u + 3].any())
+
+
 def best_wing(
-    sets: list[tuple[FloatArray, float]],
+    sets: list[CornerSet],
     length_m: float,
     width_m: float,
     camera: PinholeCamera,
     range_m: float | None = None,
-) -> tuple[FloatArray, float, float] | None:
+) -> tuple[CornerSet, float] | None:
     """The first corner set (in the given order) that an L x W rectangle fits within 1 px rms and,
-    with a range prior, at a depth within 10 % of it; else the best-fitting one. Returns
-    (corners, σ, reprojection rms px). Four points of a parallelogram fit a rectangle of the wrong
+    with a range prior, at a depth within 10 % of it; else the best-fitting one. Returns the set
+    and its reprojection rms (px). Four points of a parallelogram fit a rectangle of the wrong
     length by tilting it, so the fit alone cannot rank the sets: the order does."""
     best = None
-    for corners, sigma in sets:
-        sols = _solve(corners, length_m, width_m, camera)
+    for cs in sets:
+        sols = _solve(cs.corners_px, length_m, width_m, camera)
         if not sols:
             continue
         cost = min(c for _, _, c, _ in sols)
         depth_ok = range_m is None or all(abs(z / range_m - 1) < 0.1 for _, _, _, z in sols)
         if cost <= 1.0 and depth_ok:
-            return corners, sigma, cost
-        if depth_ok and (best is None or cost < best[2]):
-            best = (corners, sigma, cost)
+            return cs, cost
+        if depth_ok and (best is None or cost < best[1]):
+            best = (cs, cost)
     return best
 
 
 def ippe_candidates(
-    corners_px: FloatArray,
+    corner_set: CornerSet,
     length_m: float,
     width_m: float,
     camera: PinholeCamera,
@@ -106,13 +235,20 @@ def ippe_candidates(
     rng: np.random.Generator,
 ) -> list[PoseCandidate]:
     """Both IPPE poses of the wing rectangle (length along model x), best first. Their covariance
-    comes from redoing IPPE on corners perturbed by ``sigma_px`` (Monte Carlo)."""
+    comes from redoing IPPE on corners perturbed by ``sigma_px`` (Monte Carlo; derived corners are
+    rebuilt from the perturbed measured ones)."""
+    corners_px = corner_set.corners_px
     base = _solve(corners_px, length_m, width_m, camera)
     if not base:
         return []
     samples: list[list[FloatArray]] = [[] for _ in base]
     for _ in range(MONTE_CARLO):
-        noisy = _solve(corners_px + rng.normal(0, sigma_px, corners_px.shape), length_m, width_m, camera)
+        perturbed: FloatArray | None = corners_px + rng.normal(0, sigma_px, corners_px.shape)
+        if corner_set.rebuild is not None and perturbed is not None:
+            perturbed = corner_set.rebuild(perturbed)
+        if perturbed is None:
+            continue
+        noisy = [sol for sol in _solve(perturbed, length_m, width_m, camera) if np.all(np.isfinite(sol[0]))]
         for k, (ax, *_) in enumerate(base):
             if noisy:
                 near = max(noisy, key=lambda s: abs(float(s[0] @ ax)))
