@@ -1,0 +1,196 @@
+"""Level B: each frame's body pose from the tag corners every camera saw (multi-camera PnP).
+
+1. **Start**: per camera, ``cv2.solvePnPGeneric`` of its corners against the tags' body
+   coordinates (IPPE for one tag: both of its solutions; SQPnP for several), moved into the world
+   through the camera's pose; with the previous frame's pose, the candidate with the lowest
+   (gated) reprojection cost over all cameras wins. One small tag alone can flip (IPPE's two
+   solutions are close in cost); the other cameras' tags decide.
+2. **Joint Gauss-Newton** over all cameras' corners of the frame, batched over frames:
+   ``min sum_n sum_c |uv_nc - pi_n(T_world_body p_c)|^2 / sigma_n^2`` (``pi_n``: detection n's
+   camera with its distortion), world-side perturbations. This is the maximum-likelihood pose for
+   Gaussian corner noise, and ``(J^T W J)^-1`` at the optimum is its covariance (the per-frame
+   Cramer-Rao bound evaluated at the estimate).
+3. **Outliers**: a detection with a corner farther than ``outlier_sigma`` sigmas from its
+   prediction is dropped (the worst one per frame and round) and the frame refitted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._typing import BoolArray, FloatArray, IntArray
+from .geometry import exp_so3
+from .tag_camera import RigArrays, project, projection_jacobian, to_camera
+from .tags_io import TagInput
+
+MAX_ITERATIONS = 30
+MAX_OUTLIER_ROUNDS = 5
+
+
+@dataclass
+class FrameFit:
+    """Per-frame fits. R (F, 3, 3) R_world_body and t (F, 3) [m]; cov (F, 6, 6) in the order
+    (dtheta_world [rad], dp_world [m]), NaN where not measured; measured (F,); inlier (N,) per
+    detection; residual_px (N, 4, 2) against the final poses (NaN where the frame has no pose)."""
+
+    R: FloatArray
+    t: FloatArray
+    cov: FloatArray
+    measured: BoolArray
+    inlier: BoolArray
+    residual_px: FloatArray
+    iterations: int
+    chi2: float
+    dof: int
+
+
+def fit_tag_poses(data: TagInput, sigma_px: FloatArray, outlier_sigma: float) -> FrameFit:
+    """Fit every frame of ``data``; sigma_px (C,): each camera's corner sigma [px]."""
+    rig = _rig(data, sigma_px)
+    corners_b = data.corners_body_m[data.det_tag]  # (N, 4, 3)
+    R, t, ok = initial_poses(data, rig, outlier_sigma)
+    inlier = ok[data.det_frame].copy()
+    iterations = 0
+    for _ in range(MAX_OUTLIER_ROUNDS + 1):
+        R, t, H, it = gauss_newton(R, t, corners_b, data, rig, inlier)
+        iterations += it
+        res = _residuals(R, t, corners_b, data, rig)
+        z = np.linalg.norm(res, axis=-1) / rig.sigma_px[data.det_cam][:, None]  # (N, 4)
+        worst = np.where(inlier, z.max(axis=1), 0.0)
+        bad = worst > outlier_sigma
+        if not bad.any():
+            break
+        # Drop only the worst detection of each frame per round (one gross error drags the others).
+        F = data.n_frames
+        top = np.full(F, -1.0)
+        np.maximum.at(top, data.det_frame, np.where(bad, worst, -1.0))
+        inlier &= ~(bad & (worst >= top[data.det_frame]))
+    n_in = np.bincount(data.det_frame[inlier], minlength=data.n_frames)
+    measured = (n_in > 0) & (np.linalg.cond(np.where((n_in > 0)[:, None, None], H, np.eye(6))) < 1e12)
+    cov = np.full((data.n_frames, 6, 6), np.nan)
+    cov[measured] = np.linalg.inv(H[measured])
+    R[~measured], t[~measured] = np.nan, np.nan
+    res = _residuals(R, t, corners_b, data, rig)
+    use = inlier & measured[data.det_frame]
+    chi2 = float(np.sum((res[use] / rig.sigma_px[data.det_cam[use]][:, None, None]) ** 2))
+    inlier &= measured[data.det_frame]
+    return FrameFit(R, t, cov, measured, inlier, res, iterations, chi2, int(8 * use.sum() - 6 * measured.sum()))
+
+
+def _rig(data: TagInput, sigma_px: FloatArray) -> RigArrays:
+    rig = RigArrays.of(data.cameras)
+    return RigArrays(rig.K, rig.dist, rig.R_cam_world, rig.t_world_cam, np.asarray(sigma_px, dtype=float))
+
+
+def _residuals(R: FloatArray, t: FloatArray, corners_b: FloatArray, data: TagInput, rig: RigArrays) -> FloatArray:
+    k = data.det_frame
+    pw = np.einsum("nij,npj->npi", R[k], corners_b) + t[k][:, None]
+    return np.asarray(data.corners_px - project(to_camera(pw, data.det_cam, rig), data.det_cam, rig))
+
+
+def gauss_newton(
+    R: FloatArray,
+    t: FloatArray,
+    corners_b: FloatArray,
+    data: TagInput,
+    rig: RigArrays,
+    use: BoolArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, int]:
+    """Batched Gauss-Newton of every frame's pose on the detections ``use`` (N,).
+
+    Returns (R, t, H (F, 6, 6) the information ``J^T W J`` at the result, iterations)."""
+    F = data.n_frames
+    R, t = R.copy(), t.copy()
+    k, cam = data.det_frame, data.det_cam
+    w = 1.0 / rig.sigma_px[cam] ** 2
+    active = np.bincount(k[use], minlength=F) > 0
+    iterations = 0
+    for _ in range(MAX_ITERATIONS):
+        iterations += 1
+        Rk = np.where(active[k][:, None, None], R[k], np.eye(3))
+        tk = np.where(active[k][:, None], t[k], 0.0)
+        uv, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
+        r = data.corners_px - uv
+        ww = np.where(use, w, 0.0)
+        H = np.zeros((F, 6, 6))
+        g = np.zeros((F, 6))
+        np.add.at(H, k, np.einsum("n,npai,npaj->nij", ww, J, J))
+        np.add.at(g, k, np.einsum("n,npai,npa->ni", ww, J, r))
+        ok = active & (np.abs(np.linalg.det(H)) > 0)
+        step = np.zeros((F, 6))
+        step[ok] = np.linalg.solve(H[ok], g[ok][..., None])[..., 0]
+        R = np.einsum("fij,fjk->fik", exp_so3(step[:, :3]), R)
+        t = t + step[:, 3:]
+        if np.max(np.abs(step), initial=0.0) < 1e-10:
+            break
+    # The information at the final poses (one more evaluation, no step).
+    Rk = np.where(active[k][:, None, None], R[k], np.eye(3))
+    tk = np.where(active[k][:, None], t[k], 0.0)
+    _, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
+    H = np.zeros((F, 6, 6))
+    np.add.at(H, k, np.einsum("n,npai,npaj->nij", np.where(use, w, 0.0), J, J))
+    return R, t, H, iterations
+
+
+def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Each frame's starting pose (see the module's step 1). Returns R (F, 3, 3), t (F, 3) and
+    which frames have one."""
+    import cv2
+
+    F = data.n_frames
+    R = np.tile(np.eye(3), (F, 1, 1))
+    t = np.zeros((F, 3))
+    ok = np.zeros(F, dtype=bool)
+    corners_b = data.corners_body_m
+    starts = np.searchsorted(data.det_frame, np.arange(F + 1))
+    prev: tuple[FloatArray, FloatArray] | None = None
+    for f in range(F):
+        rows = np.arange(starts[f], starts[f + 1])
+        if not len(rows):
+            continue
+        cands: list[tuple[FloatArray, FloatArray]] = [] if prev is None else [prev]
+        for c in np.unique(data.det_cam[rows]):
+            mine = rows[data.det_cam[rows] == c]
+            obj = corners_b[data.det_tag[mine]].reshape(-1, 3)
+            img = data.corners_px[mine].reshape(-1, 2)
+            flag = cv2.SOLVEPNP_IPPE if len(mine) == 1 else cv2.SOLVEPNP_SQPNP
+            cam = data.cameras[int(c)]
+            try:
+                n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.dist, flags=flag)
+            except cv2.error:
+                continue
+            for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
+                R_cb = cv2.Rodrigues(rv)[0]
+                cands.append((cam.R_world_cam @ R_cb, cam.R_world_cam @ tv.ravel() + cam.t_world_cam))
+        if not cands:
+            continue
+        best = _best_candidate(cands, rows, corners_b, data, rig, gate_sigma)
+        R[f], t[f] = best
+        ok[f] = True
+        prev = best
+    return R, t, ok
+
+
+def _best_candidate(
+    cands: list[tuple[FloatArray, FloatArray]],
+    rows: IntArray,
+    corners_b: FloatArray,
+    data: TagInput,
+    rig: RigArrays,
+    gate_sigma: float,
+) -> tuple[FloatArray, FloatArray]:
+    """The candidate pose with the lowest gated reprojection cost over the frame's detections."""
+    K, n = len(cands), len(rows)
+    Rc = np.array([c[0] for c in cands])
+    tc = np.array([c[1] for c in cands])
+    pb = corners_b[data.det_tag[rows]]  # (n, 4, 3)
+    pw = np.einsum("kij,npj->knpi", Rc, pb) + tc[:, None, None]
+    cam = np.tile(data.det_cam[rows], K)
+    pc = to_camera(pw.reshape(K * n, 4, 3), cam, rig)
+    uv = project(pc, cam, rig).reshape(K, n, 4, 2)
+    z2 = np.sum((uv - data.corners_px[rows]) ** 2, axis=-1) / rig.sigma_px[data.det_cam[rows]][None, :, None] ** 2
+    behind = (pc[..., 2] <= 0).reshape(K, n, 4)
+    cost = np.where(behind | ~np.isfinite(z2), gate_sigma**2, np.minimum(z2, gate_sigma**2)).sum(axis=(1, 2))
+    return cands[int(np.argmin(cost))]
