@@ -43,10 +43,9 @@ def simulate(
     elif level == "B":
         written, truth = write_tag_simulation(out, TagSimConfig(motion=motion, frames=frames or 500), seed)
     else:
-        from ..marker_pose.tag_render import IMAGE_BINNING, write_image_simulation
+        from ..marker_pose.tag_render import image_config, write_image_simulation
 
-        config_c = TagSimConfig(motion=motion, frames=frames or 20, binning=IMAGE_BINNING, distortion=(0.0,) * 5)
-        written, truth = write_image_simulation(out, config_c, seed)
+        written, truth = write_image_simulation(out, image_config(motion=motion, frames=frames or 20), seed)
     typer.echo(f"wrote {written} and {truth}")
 
 
@@ -90,13 +89,10 @@ def estimate(
     elif level == "B":
         result = run_tags(markers, options=TagPoseOptions(motion_prior=motion_prior, pixel_sigma_px=pixel_sigma_px))
     else:
-        import tempfile
-
         from ..marker_pose.pipeline import run_images
 
         opts = ImagePoseOptions(motion_prior=motion_prior, pixel_sigma_px=pixel_sigma_px, detector=detector)
-        with tempfile.TemporaryDirectory(prefix="tumblescan-images-") as work:
-            result = run_images(markers, Path(work), options=opts)
+        result = run_images(markers, options=opts)
     if report is not None:
         from ..marker_pose.report import build_report
 

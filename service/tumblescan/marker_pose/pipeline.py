@@ -9,7 +9,7 @@ from pathlib import Path
 from .._typing import Progress, no_progress
 from .estimate import estimate_poses
 from .markers_io import MarkerInput, read_markers
-from .options import MarkerPoseLimits, MarkerPoseOptions, TagPoseOptions
+from .options import ImagePoseOptions, MarkerPoseLimits, MarkerPoseOptions, TagPoseOptions
 from .result import MarkerPoseResult
 from .simulate import SimConfig, simulate
 from .tag_estimate import estimate_tag_poses
@@ -90,3 +90,29 @@ def write_tag_simulation(out: Path, config: TagSimConfig, seed: int) -> tuple[Pa
     truth["seed"] = seed
     (out / "truth.json").write_text(json.dumps(truth))
     return out / "tags.json", out / "truth.json"
+
+
+def run_images(
+    images: Path,
+    *,
+    options: ImagePoseOptions | None = None,
+    limits: MarkerPoseLimits | None = None,
+    progress: Progress = no_progress,
+) -> MarkerPoseResult:
+    """Level C: detect the tags in every image of a zip or directory, then level B."""
+    import time
+
+    import numpy as np
+
+    from .errors import TooFewFramesError
+    from .images_io import detect_tags, read_image_set
+
+    options = options or ImagePoseOptions()
+    image_set = read_image_set(images, limits)
+    clock = time.perf_counter()
+    data, info = detect_tags(image_set, options, progress)
+    timing = {"detect_s": time.perf_counter() - clock}
+    n = len(np.unique(data.det_frame))
+    if n < 3:
+        raise TooFewFramesError(f"tags of the layout were found in {n} frames; at least 3 are needed", field="images")
+    return estimate_tag_poses(data, options, progress, level="C", detection=info, timing=timing)

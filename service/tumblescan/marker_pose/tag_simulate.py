@@ -186,7 +186,7 @@ def box_tags(size_m: float) -> FloatArray:
         (np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), [h[0], 0.0, 0.0]),
         (np.array([-1.0, 0, 0]), np.array([0, -1.0, 0]), [-h[0], 0.0, 0.0]),
     ]
-    for dx in (-0.105, 0.105):
+    for dx in (-0.11, 0.11):
         spots += [
             (np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), [dx, 0.02, h[2]]),
             (np.array([0, 0, -1.0]), np.array([1.0, 0, 0]), [dx, -0.02, -h[2]]),
@@ -199,7 +199,7 @@ def box_tags(size_m: float) -> FloatArray:
         T[:3, :3] = np.column_stack([x, np.cross(n, x), n])
         T[:3, 3] = p
         out.append(T)
-    del size_m  # the spots fit tags up to 150 mm with their white margin
+    del size_m  # the spots fit tags up to 160 mm with their white margin of one cell
     return np.array(out)
 
 
