@@ -76,9 +76,13 @@ def estimate(
 
     level = input_level(markers)
     if level != "A":
-        level_a_only = {"--layout": layout, "--method": method != "graph", "--body-frame": body_frame}
-        level_a_only["--point-sigma-m"] = point_sigma_m
-        given = [name for name, v in level_a_only.items() if v not in (None, False)]
+        level_a_only = {
+            "--layout": layout is not None,
+            "--method": method != "graph",
+            "--body-frame": body_frame is not None,
+            "--point-sigma-m": point_sigma_m is not None,
+        }
+        given = [name for name, used in level_a_only.items() if used]
         if given:
             raise InputError(f"{given[0]} applies to level A (markers) input only", field=given[0].lstrip("-"))
     if level == "A":

@@ -76,10 +76,20 @@ class TagPoseOptions(BaseModel):
         None, gt=0, le=10, description="1-sigma corner error per image axis [px]; overrides every camera's pixel_sigma"
     )
     marginals: bool = Field(True, description="compute each pose's covariance")
+    estimate_pixel_sigma: bool = Field(
+        False,
+        description="estimate the corner sigma from the fit's residuals (robustly, pooled over the cameras) and "
+        "refit with it, instead of trusting each camera's pixel_sigma",
+    )
 
 
 class ImagePoseOptions(TagPoseOptions):
-    """Level C: tags detected in the images first, then level B."""
+    """Level C: tags detected in the images first, then level B. The detector's corner accuracy
+    depends on the images, so the corner sigma is estimated from the residuals by default."""
+
+    estimate_pixel_sigma: bool = Field(
+        True, description="estimate the corner sigma from the fit's residuals (a detector's accuracy is not known)"
+    )
 
     detector: Literal["apriltag", "aruco"] = Field(
         "apriltag",

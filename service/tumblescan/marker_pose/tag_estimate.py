@@ -52,6 +52,19 @@ def estimate_tag_poses(
     progress("per-frame fits", 0.3)
     clock = time.perf_counter()
     fit = fit_tag_poses(data, sigma, options.outlier_sigma)
+    if options.estimate_pixel_sigma and fit.measured.any():
+        estimated = residual_sigma_px(fit)
+        warnings.append(
+            f"corner sigma estimated from the residuals: {estimated:.3f} px per axis "
+            f"(declared {np.median(sigma):.3f} px); the covariances use it"
+        )
+        sigma = np.full(len(data.cameras), estimated)
+        fit = fit_tag_poses(data, sigma, options.outlier_sigma)
+    elif fit.dof > 0 and not 0.25 <= fit.chi2 / fit.dof <= 4.0:
+        warnings.append(
+            f"the corner residuals are {np.sqrt(fit.chi2 / fit.dof):.2f} x the declared pixel_sigma: "
+            "the covariances are off by that factor (estimate_pixel_sigma: true estimates it)"
+        )
     timing["per_frame_s"] = time.perf_counter() - clock
     R, t, cov = fit.R, fit.t, fit.cov
     status = [STATUS_MEASURED if m else STATUS_MISSING for m in fit.measured]
@@ -100,6 +113,18 @@ def estimate_tag_poses(
     return _result(data, fit, R, t, cov, status, info, options, sigma, warnings, timing, level, detection)
 
 
+def residual_sigma_px(fit: FrameFit) -> float:
+    """A robust corner sigma per image axis [px] from the inlier residuals: ``1.4826 median|r|``
+    (a gross error does not move it), scaled by ``sqrt(n / dof)`` for the 6 pose parameters each
+    frame's fit absorbed."""
+    use = fit.inlier
+    r = np.abs(fit.residual_px[use]).ravel()
+    r = r[np.isfinite(r)]
+    if len(r) < 8 or fit.dof <= 0:
+        return float(np.sqrt(np.mean(r**2))) if len(r) else 1.0
+    return float(max(1.4826 * np.median(r) * np.sqrt(len(r) / fit.dof), 1e-3))
+
+
 def _typical_sigma(cov: FloatArray, start: int) -> float:
     """Typical per-axis 1-sigma of the rotation (start 0) or position (start 3) block."""
     ok = ~np.isnan(cov[:, 0, 0])
@@ -139,7 +164,7 @@ def _result(
         FramePose(
             frame=int(data.frames[f]),
             t=float(data.t_s[f]),
-            status=status[f],  # type: ignore[arg-type]
+            status=status[f],
             n_markers=4 * int(n_tags[f]),
             n_tags=int(n_tags[f]),
             T_world_body=PoseValue(q_wxyz=q[f].tolist(), t_m=t[f].tolist()) if have[f] else None,
@@ -169,7 +194,7 @@ def _result(
     ]
     seen = np.bincount(k, minlength=F) > 0
     return MarkerPoseResult(
-        level=level,  # type: ignore[arg-type]
+        level=level,
         method="graph",
         body_frame="layout",
         point_sigma_m=None,
@@ -186,7 +211,7 @@ def _result(
         ),
         associations={},
         segments=_segments(data, fit),
-        graph=GraphInfo(**info),  # type: ignore[arg-type]
+        graph=GraphInfo(**info),
         residuals=Residuals(
             rms_m=None,
             per_marker_rms_m={},
@@ -208,9 +233,9 @@ def _segments(data: TagInput, fit: FrameFit) -> list[Segment]:
         n = int(data.frames[f])
         if prev is None or n != prev + 1:
             if start is not None:
-                segs.append(Segment(frames=[start, prev], linked_by="layout"))  # type: ignore[list-item]
+                segs.append(Segment(frames=[start, prev], linked_by="layout"))
             start = n
         prev = n
     if start is not None:
-        segs.append(Segment(frames=[start, prev], linked_by="layout"))  # type: ignore[list-item]
+        segs.append(Segment(frames=[start, prev], linked_by="layout"))
     return segs

@@ -108,7 +108,7 @@ def render_frame(sim: TagSimulation, k: int, c: int, rng: np.random.Generator) -
         small = cv2.resize(canvas, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
         image[y0:y1, x0:x1] = small
     image = cv2.GaussianBlur(image, (0, 0), BLUR_SIGMA_PX)
-    image += rng.normal(0.0, NOISE_DN, image.shape)
+    image = np.asarray(image, dtype=float) + rng.normal(0.0, NOISE_DN, image.shape)
     return np.asarray(np.clip(np.round(image), 0, 255).astype(np.uint8))
 
 

@@ -175,10 +175,13 @@ def _cameras(value: Any, limits: MarkerPoseLimits) -> list[RigCamera]:
         cid = c.get("id")
         if not isinstance(cid, str) or not cid or any(cam.id == cid for cam in out):
             raise MalformedInputError(f"{where}.id must be a unique non-empty string", field=f"{where}.id")
-        w, h = c.get("width"), c.get("height")
-        for name, v in (("width", w), ("height", h)):
+        size: list[int] = []
+        for name in ("width", "height"):
+            v = c.get(name)
             if not isinstance(v, int) or isinstance(v, bool) or not 1 <= v <= 100_000:
                 raise BadCameraError(f"{where}.{name} must be a positive integer [px]", field=f"{where}.{name}")
+            size.append(v)
+        w, h = size
         K = _number_matrix(c.get("K"), 3, 3, f"{where}.K")
         if K[0, 0] <= 0 or K[1, 1] <= 0 or np.any(K[1:, 0] != 0) or K[2, 1] != 0 or K[2, 2] != 1:
             raise BadCameraError(
@@ -206,7 +209,7 @@ def _tags(value: Any, limits: MarkerPoseLimits) -> tuple[str, float, list[int], 
     family = value.get("family")
     if family not in FAMILIES:
         raise UnknownFamilyError(f"tags.family {family!r} is not one of {', '.join(FAMILIES)}", field="tags.family")
-    size = value.get("size_m")
+    size: Any = value.get("size_m")
     if not _is_number(size) or not 0 < size <= 10:
         raise MalformedInputError(f"tags.size_m must be in (0, 10] m, not {size!r}", field="tags.size_m")
     layout = value.get("layout")
@@ -218,11 +221,12 @@ def _tags(value: Any, limits: MarkerPoseLimits) -> tuple[str, float, list[int], 
     Ts = []
     for i, t in enumerate(layout):
         where = f"tags.layout[{i}]"
-        if not isinstance(t, dict) or not isinstance(t.get("id"), int) or isinstance(t.get("id"), bool) or t["id"] < 0:
+        tid = t.get("id") if isinstance(t, dict) else None
+        if not isinstance(tid, int) or isinstance(tid, bool) or tid < 0:
             raise MalformedInputError(f"{where}.id must be an integer >= 0", field=f"{where}.id")
-        if t["id"] in ids:
-            raise MalformedInputError(f"tag id {t['id']} appears twice", field=f"{where}.id")
-        ids.append(t["id"])
+        if tid in ids:
+            raise MalformedInputError(f"tag id {tid} appears twice", field=f"{where}.id")
+        ids.append(tid)
         Ts.append(rigid_transform(t.get("T_body_tag"), f"{where}.T_body_tag"))
     T_body_tag = np.array(Ts)
     extent = float(np.max(np.linalg.norm(T_body_tag[:, None, :3, 3] - T_body_tag[None, :, :3, 3], axis=-1)))
