@@ -53,8 +53,16 @@ def fit_tag_poses(data: TagInput, sigma_px: FloatArray, outlier_sigma: float) ->
     R, t, ok = initial_poses(data, rig, outlier_sigma)
     inlier = ok[data.det_frame].copy()
     iterations = 0
+    F = data.n_frames
+    H = np.zeros((F, 6, 6))
+    rows = np.arange(len(data.det_frame))
     for _ in range(MAX_OUTLIER_ROUNDS + 1):
-        R, t, H, it = gauss_newton(R, t, corners_b, data, rig, inlier)
+        # Only the frames that lost a detection are refitted after the first round.
+        k = data.det_frame[rows]
+        R[k], t[k], H_rows, it = gauss_newton(
+            R[k], t[k], corners_b[rows], data.corners_px[rows], data.det_cam[rows], rig, inlier[rows], k
+        )
+        H[k] = H_rows
         iterations += it
         res = _residuals(R, t, corners_b, data, rig)
         z = np.linalg.norm(res, axis=-1) / rig.sigma_px[data.det_cam][:, None]  # (N, 4)
@@ -63,10 +71,10 @@ def fit_tag_poses(data: TagInput, sigma_px: FloatArray, outlier_sigma: float) ->
         if not bad.any():
             break
         # Drop only the worst detection of each frame per round (one gross error drags the others).
-        F = data.n_frames
         top = np.full(F, -1.0)
         np.maximum.at(top, data.det_frame, np.where(bad, worst, -1.0))
         inlier &= ~(bad & (worst >= top[data.det_frame]))
+        rows = np.flatnonzero(top[data.det_frame] >= 0)
     n_in = np.bincount(data.det_frame[inlier], minlength=data.n_frames)
     measured = (n_in > 0) & (np.linalg.cond(np.where((n_in > 0)[:, None, None], H, np.eye(6))) < 1e12)
     cov = np.full((data.n_frames, 6, 6), np.nan)
@@ -91,19 +99,25 @@ def _residuals(R: FloatArray, t: FloatArray, corners_b: FloatArray, data: TagInp
 
 
 def gauss_newton(
-    R: FloatArray,
-    t: FloatArray,
+    R_rows: FloatArray,
+    t_rows: FloatArray,
     corners_b: FloatArray,
-    data: TagInput,
+    corners_px: FloatArray,
+    cam: IntArray,
     rig: RigArrays,
     use: BoolArray,
+    frame: IntArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray, int]:
-    """Batched Gauss-Newton of every frame's pose on the detections ``use`` (N,).
+    """Batched Gauss-Newton of the poses of the frames that detections (N rows) belong to.
 
-    Returns (R, t, H (F, 6, 6) the information ``J^T W J`` at the result, iterations)."""
-    F = data.n_frames
-    R, t = R.copy(), t.copy()
-    k, cam = data.det_frame, data.det_cam
+    R_rows (N, 3, 3), t_rows (N, 3): each row's frame's starting pose; corners_b (N, 4, 3) body
+    [m]; corners_px (N, 4, 2); cam (N,); use (N,): the detections fitted; frame (N,): each row's
+    frame (any integer labels). Returns per row (R, t, H (6, 6) the frame's information
+    ``J^T W J`` at the result) and the iterations."""
+    labels, k = np.unique(frame, return_inverse=True)
+    F = len(labels)
+    first = np.unique(k, return_index=True)[1]
+    R, t = R_rows[first].copy(), t_rows[first].copy()
     w = 1.0 / rig.sigma_px[cam] ** 2
     active = np.bincount(k[use], minlength=F) > 0
     iterations = 0
@@ -112,7 +126,7 @@ def gauss_newton(
         Rk = np.where(active[k][:, None, None], R[k], np.eye(3))
         tk = np.where(active[k][:, None], t[k], 0.0)
         uv, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
-        r = data.corners_px - uv
+        r = corners_px - uv
         ww = np.where(use, w, 0.0)
         H = np.zeros((F, 6, 6))
         g = np.zeros((F, 6))
@@ -131,7 +145,7 @@ def gauss_newton(
     _, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
     H = np.zeros((F, 6, 6))
     np.add.at(H, k, np.einsum("n,npai,npaj->nij", np.where(use, w, 0.0), J, J))
-    return R, t, H, iterations
+    return R[k], t[k], H[k], iterations
 
 
 def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[FloatArray, FloatArray, BoolArray]:
