@@ -218,6 +218,11 @@ def main() -> None:
             "\ntags (B: 500 frames of detections at 0.25 px; C: 10 frames of 4 x 1024 px images), "
             "ratio against the per-frame tag bound (goal <= 1.3)\n" + table(tag_summary(runs), TAG_HEADER)
         )
+        if "B" in args.levels and not args.no_timing:
+            from .tags import timings_b
+
+            header = ["frames", "detections", "method", "read wall/cpu", "estimate wall/cpu"]
+            print("\ntimings [s] (level B, tagged box)\n" + table(timings_b(), header))
     for with_layout in () if args.timing_only or "A" not in args.levels else (True, False):
         name = "given layout" if with_layout else "bootstrapped layout"
         runs = accuracy(args.seeds, with_layout)

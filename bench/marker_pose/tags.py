@@ -156,3 +156,27 @@ def summary(runs: list[dict[str, Any]]) -> list[list[object]]:
             ]
         )
     return rows
+
+
+def timings_b() -> list[list[object]]:
+    """Level B, 500 and 10,000 frames of the tagged box (about 12 detections a frame): reading and
+    checking the document, then the estimate without and with the motion prior (wall / CPU s)."""
+    rows: list[list[object]] = []
+    for frames in (500, 10_000):
+        doc = simulate_tags(TagSimConfig(frames=frames), 11).document()
+        wall, cpu = time.perf_counter(), time.process_time()
+        data = tags_from_json(doc)
+        read = f"{time.perf_counter() - wall:.2f} / {time.process_time() - cpu:.2f}"
+        for name, opts in (("ours", {}), ("ours+cv", {"motion_prior": "constant_velocity"})):
+            wall, cpu = time.perf_counter(), time.process_time()
+            estimate_tag_poses(data, TagPoseOptions.model_validate(opts))
+            rows.append(
+                [
+                    frames,
+                    len(data.det_frame),
+                    name,
+                    read,
+                    f"{time.perf_counter() - wall:.2f} / {time.process_time() - cpu:.2f}",
+                ]
+            )
+    return rows
