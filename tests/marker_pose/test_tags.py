@@ -168,3 +168,30 @@ def test_cli_level_b_round_trip_and_refusal(tmp_path: Path) -> None:
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     r = runner.invoke(app, ["estimate", str(tmp_path / "bad.json"), "--json"])
     assert r.exit_code == 2 and "cameras[0].K" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_mangled_documents_are_refused_never_crash() -> None:
+    """Every leaf of a small document replaced by values of the wrong kind: an InputError, or an
+    input that is estimated."""
+    doc = copy.deepcopy(BASE)
+    doc["detections"] = doc["detections"][:12]
+
+    def leaves(node: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+        if isinstance(node, dict):
+            return [p for k, v in node.items() for p in leaves(v, (*path, k))]
+        if isinstance(node, list):
+            return [p for i, v in enumerate(node[:3]) for p in leaves(v, (*path, i))]
+        return [path]
+
+    for path in leaves(doc):
+        for value in ("x", None, True, -1, 1e300, [], {}):
+            bad = copy.deepcopy(doc)
+            target = bad
+            for p in path[:-1]:
+                target = target[p]
+            target[path[-1]] = value
+            try:
+                data = tags_from_json(bad)
+            except InputError:
+                continue
+            estimate_tag_poses(data)  # a valid (if odd) input is estimated without an error

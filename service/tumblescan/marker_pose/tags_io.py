@@ -34,6 +34,7 @@ FORMAT = "tumblescan.tags.v1"
 FAMILIES = ("tag36h11", "tag25h9", "tag16h5")
 TOP_KEYS = {"format", "units", "frame_rate_hz", "cameras", "tags", "detections", "frames"}
 CAMERA_KEYS = {"id", "width", "height", "K", "dist", "T_world_cam", "pixel_sigma"}
+MAX_ENTRY = 1e9  # larger matrix entries are nonsense here (and would overflow the checks)
 DETECTION_KEYS = {"frame", "t", "camera", "id", "corners_px"}
 
 
@@ -143,7 +144,10 @@ def _number_matrix(value: Any, rows: int, cols: int, where: str) -> FloatArray:
     )
     if not ok:
         raise MalformedInputError(f"{where} must be a {rows}x{cols} matrix of numbers", field=where)
-    return np.array(value, dtype=float)
+    M = np.array(value, dtype=float)
+    if np.max(np.abs(M)) > MAX_ENTRY:
+        raise MalformedInputError(f"{where} has an entry over {MAX_ENTRY:g} in magnitude", field=where)
+    return M
 
 
 def rigid_transform(value: Any, where: str) -> FloatArray:
@@ -287,7 +291,7 @@ def _detections(dets: list[Any], out: TagInput, frame_t: dict[int, float] | None
             raise MalformedInputError(f"{where}.t must be a number [s]", field=f"{where}.t")
         if frame_t is not None and (f not in frame_t or frame_t[f] != ti):
             raise MalformedInputError(f"{where}: frame {f} at t = {ti} is not in frames", field=f"{where}.frame")
-        if c not in cam_index:
+        if not isinstance(c, str) or c not in cam_index:
             raise MalformedInputError(f"{where}.camera {c!r} is not one of the cameras", field=f"{where}.camera")
         if not isinstance(tid, int) or isinstance(tid, bool):
             raise MalformedInputError(f"{where}.id must be an integer", field=f"{where}.id")
