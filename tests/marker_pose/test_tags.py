@@ -183,8 +183,9 @@ def test_mangled_documents_are_refused_never_crash() -> None:
             return [p for i, v in enumerate(node[:3]) for p in leaves(v, (*path, i))]
         return [path]
 
+    wrong: list[Any] = ["x", None, True, -1, 1e300, [], {}]
     for path in leaves(doc):
-        for value in ("x", None, True, -1, 1e300, [], {}):
+        for value in wrong:
             bad = copy.deepcopy(doc)
             target = bad
             for p in path[:-1]:
