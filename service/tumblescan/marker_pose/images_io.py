@@ -160,12 +160,28 @@ def detect_tags(
     per_camera = dict.fromkeys((c.id for c in scene.cameras), 0)
     tag_index = {t: i for i, t in enumerate(scene.tag_ids)}
     keys = list(images)
+    last: dict[int, tuple[int, np.ndarray]] = {}  # camera -> (frame index, corners found there (n, 2))
+    full_frames = 0
     for n, (c, f) in enumerate(keys):
-        for d in detector.detect(images.read((c, f))):
-            found += 1
-            if d.id in tag_index:
-                rows.append((f, c, tag_index[d.id], d.corners_px))
-                per_camera[scene.cameras[c].id] += 1
+        image = images.read((c, f))
+        roi = _roi(last.get(c), f, image.shape) if options.roi_tracking else None
+        if roi is None:
+            full_frames += 1
+            detections = detector.detect(image)
+        else:
+            x0, y0, x1, y1 = roi
+            detections = detector.detect(np.ascontiguousarray(image[y0:y1, x0:x1]))
+            for d in detections:  # crop pixels to image pixels: a shift by the crop's corner, exactly
+                d.corners_px = d.corners_px + np.array([x0, y0], dtype=float)
+        known = [d for d in detections if d.id in tag_index]
+        found += len(detections)
+        for d in known:
+            rows.append((f, c, tag_index[d.id], d.corners_px))
+            per_camera[scene.cameras[c].id] += 1
+        if known:
+            last[c] = (f, np.concatenate([d.corners_px for d in known]))
+        else:
+            last.pop(c, None)
         if n % 10 == 0:
             progress("detecting tags", 0.05 + 0.25 * n / max(len(keys), 1))
     rows.sort(key=lambda r: (r[0], r[1], r[2]))
@@ -186,6 +202,10 @@ def detect_tags(
     )
     if found > len(rows):
         data.warnings.append(f"{found - len(rows)} detections of tags not in the layout were ignored")
+    if options.roi_tracking:
+        data.warnings.append(
+            f"tags were searched for around the last frame's tags in {len(keys) - full_frames} of {len(keys)} images"
+        )
     info = DetectionInfo(
         detector="pupil-apriltags" if options.detector == "apriltag" else "opencv aruco",
         images=len(keys),
@@ -195,3 +215,22 @@ def detect_tags(
         time_s=time.perf_counter() - started,
     )
     return data, info
+
+
+ROI_FULL_EVERY = 10  # every this many frames a camera's whole image is searched (tags entering the view)
+ROI_MARGIN = 0.5  # of the last tags' extent, on each side
+ROI_MIN_MARGIN_PX = 40
+
+
+def _roi(last: tuple[int, np.ndarray] | None, frame: int, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
+    """The crop (x0, y0, x1, y1) to search in ``frame`` around the tags this camera found in the
+    previous frame (grown by half their extent, at least 40 px, on each side), or None for the
+    whole image: no tags last frame, a gap, or every ``ROI_FULL_EVERY`` frames."""
+    if last is None or last[0] != frame - 1 or frame % ROI_FULL_EVERY == 0:
+        return None
+    lo, hi = last[1].min(axis=0), last[1].max(axis=0)
+    grow = np.maximum(ROI_MARGIN * (hi - lo), ROI_MIN_MARGIN_PX)
+    x0, y0 = np.floor(lo - grow).astype(int)
+    x1, y1 = np.ceil(hi + grow).astype(int) + 1
+    H, W = shape[:2]
+    return max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
