@@ -72,7 +72,7 @@ def level_b(seeds: int, frames: int = 500) -> list[dict[str, Any]]:
     return runs
 
 
-def level_c(seeds: int, frames: int = 10) -> list[dict[str, Any]]:
+def level_c(seeds: int, frames: int = 30) -> list[dict[str, Any]]:
     runs = []
     for motion in MOTIONS:
         for seed in range(seeds):
