@@ -18,6 +18,7 @@ from tumblescan.marker_pose.images_io import detect_tags, read_image_set
 from tumblescan.marker_pose.options import ImagePoseOptions
 from tumblescan.marker_pose.pipeline import run_images
 from tumblescan.marker_pose.tag_camera import RigArrays, project, to_camera
+from tumblescan.marker_pose.tag_detect import TagDetector
 from tumblescan.marker_pose.tag_render import image_config, write_image_simulation
 from tumblescan.marker_pose.tag_simulate import TagSimulation, simulate_tags
 
@@ -106,3 +107,20 @@ def test_cli_level_c_round_trip(tmp_path: Path) -> None:
     assert doc["level"] == "C" and doc["detection"]["detector"] == "opencv aruco"
     r = runner.invoke(app, ["estimate", str(tmp_path / "images.zip"), "--method", "paper"])
     assert r.exit_code == 2 and "--method" in r.output
+
+
+def test_16_bit_images_are_read_as_8_bit(scene: tuple[Path, TagSimulation], tmp_path: Path) -> None:
+    archive, _ = scene
+    name = "images/cam1/000000.png"
+    with zipfile.ZipFile(archive) as zf:
+        img8 = cv2.imdecode(np.frombuffer(zf.read(name), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert img8 is not None
+    img16 = (img8.astype(np.uint16) * 257).astype(np.uint16)
+    png16 = cv2.imencode(".png", img16)[1].tobytes()
+    wide = read_image_set(_rewrite(archive, tmp_path / "w.zip", {name: png16}))
+    key = next(k for k, v in wide.members.items() if v == name)
+    detector = TagDetector("apriltag", "tag36h11")
+    narrow = {d.id: d.corners_px for d in detector.detect(img8)}
+    from_wide = {d.id: d.corners_px for d in detector.detect(wide.read(key))}
+    assert narrow and set(from_wide) == set(narrow)  # the same tags, at the same corners
+    assert all(np.max(np.abs(from_wide[i] - narrow[i])) < 0.05 for i in narrow)

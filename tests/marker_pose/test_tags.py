@@ -97,7 +97,7 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], None], str, str]] = [
         "NaN",
         _set(["detections", 2, "corners_px", 1, 0], float("nan")),
         "non_finite_value",
-        "detections.2.corners_px.1.0",
+        "detections[2].corners_px[1][0]",
     ),
     ("K lower", _set(["cameras", 1, "K", 1, 0], 5.0), "invalid_camera", "cameras[1].K"),
     ("K negative", _set(["cameras", 0, "K", 0, 0], -100.0), "invalid_camera", "cameras[0].K"),

@@ -98,6 +98,7 @@ def tags_from_json(doc: Any, *, limits: MarkerPoseLimits | None = None, require_
         raise MalformedInputError(f"format must be {FORMAT!r}, not {doc.get('format')!r}", field="format")
     bad = first_non_finite(doc)
     if bad is not None:
+        bad = _bracketed(bad)
         raise NonFiniteValueError(f"{bad} is not a finite number (NaN and Infinity are refused)", field=bad)
     _check_units(doc.get("units"))
     rate = doc.get("frame_rate_hz")
@@ -133,6 +134,14 @@ def tags_from_json(doc: Any, *, limits: MarkerPoseLimits | None = None, require_
         out.t_s = np.array([frame_t[f] for f in out.frames])
     if dets:
         _detections(dets, out, frame_t, limits)
+    return out
+
+
+def _bracketed(dotted: str) -> str:
+    """``detections.2.corners_px.1.0`` -> ``detections[2].corners_px[1][0]`` (the fields' style here)."""
+    out = ""
+    for part in dotted.split("."):
+        out += f"[{part}]" if part.isdigit() else (f".{part}" if out else part)
     return out
 
 
