@@ -124,3 +124,10 @@ def test_16_bit_images_are_read_as_8_bit(scene: tuple[Path, TagSimulation], tmp_
     from_wide = {d.id: d.corners_px for d in detector.detect(wide.read(key))}
     assert narrow and set(from_wide) == set(narrow)  # the same tags, at the same corners
     assert all(np.max(np.abs(from_wide[i] - narrow[i])) < 0.05 for i in narrow)
+
+
+def test_report_tells_what_the_detector_found(scene: tuple[Path, TagSimulation]) -> None:
+    from tumblescan.marker_pose.report import build_report
+
+    html = build_report(run_images(scene[0]), "images")
+    assert "pupil-apriltags in 12 images" in html and "Residuals per tag" in html

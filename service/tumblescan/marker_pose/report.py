@@ -52,6 +52,7 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
                 ]
             ],
         ),
+        _detection_html(result),
         "<h2>Trajectory</h2>",
         figure_html(fig3d, "trajectory"),
     ]
@@ -96,3 +97,18 @@ def residual_text(result: MarkerPoseResult) -> str:
     if result.residuals.rms_px is not None:
         return f"{result.residuals.rms_px:.3f} px"
     return "-"
+
+
+def _detection_html(result: MarkerPoseResult) -> str:
+    """Level C: what the detector found; levels B and C: the corner sigma used."""
+    parts = []
+    d = result.detection
+    if d is not None:
+        parts.append(
+            f"<p>Tags detected by {d.detector} in {d.images} images: {d.detections} detections, "
+            f"{d.known_tags} of the layout's tags, in {d.time_s:.1f} s.</p>"
+        )
+    if result.pixel_sigma_px:
+        sig = ", ".join(f"{k} {v:.3f}" for k, v in result.pixel_sigma_px.items())
+        parts.append(f"<p>Corner sigma per camera [px]: {sig}.</p>")
+    return "".join(parts)

@@ -14,7 +14,6 @@ Written as a zip: ``scene.json`` (level B's document without detections, with ``
 
 from __future__ import annotations
 
-import io
 import json
 import zipfile
 from pathlib import Path
@@ -35,7 +34,6 @@ MARKER_PX = 80  # the generated marker image (8 cells of 10 px, black border inc
 BACKGROUND_DN, FACE_DN, BLACK_DN, WHITE_DN = 25.0, 150.0, 30.0, 220.0
 BLUR_SIGMA_PX = 0.6
 NOISE_DN = 2.0
-ARUCO_FAMILY = {"tag36h11": "DICT_APRILTAG_36h11", "tag25h9": "DICT_APRILTAG_25h9", "tag16h5": "DICT_APRILTAG_16h5"}
 
 
 def image_config(**kw: object) -> TagSimConfig:
@@ -185,7 +183,7 @@ def write_image_simulation(out: Path, config: TagSimConfig, seed: int) -> tuple[
         for (cam, k), img in render_all(sim, seed).items():
             ok, png = cv2.imencode(".png", img)
             assert ok
-            zf.writestr(f"images/{cam}/{k:06d}.png", io.BytesIO(png.tobytes()).getvalue())
+            zf.writestr(f"images/{cam}/{k:06d}.png", png.tobytes())
     truth = sim.truth(detectable(sim))
     truth["seed"] = seed
     (out / "truth.json").write_text(json.dumps(truth))
