@@ -196,3 +196,13 @@ def test_mangled_documents_are_refused_never_crash() -> None:
             except InputError:
                 continue
             estimate_tag_poses(data)  # a valid (if odd) input is estimated without an error
+
+
+def test_client_model_reads_the_tag_result() -> None:
+    from tumblescan_client.results import result_model
+
+    sim = simulate_tags(TagSimConfig(frames=30), 6)
+    result = estimate_tag_poses(tags_from_json(sim.document()), TagPoseOptions(motion_prior="constant_velocity"))
+    typed = result_model("marker-pose-graph").model_validate_json(result.model_dump_json())
+    assert typed.model_dump(mode="json") == result.model_dump(mode="json")
+    assert typed.level == "B" and typed.residuals.rms_px is not None  # type: ignore[attr-defined]
