@@ -76,7 +76,7 @@ def distort_pixels(xy: FloatArray, K: FloatArray, dist: FloatArray) -> FloatArra
 
 def to_camera(p_world_m: FloatArray, cam: IntArray, rig: RigArrays) -> FloatArray:
     """World points (N, P, 3) seen by cameras ``cam`` (N,) -> camera-frame points (N, P, 3) [m]."""
-    return np.einsum("nij,npj->npi", rig.R_cam_world[cam], p_world_m - rig.t_world_cam[cam][:, None])
+    return np.asarray((p_world_m - rig.t_world_cam[cam][:, None]) @ np.transpose(rig.R_cam_world[cam], (0, 2, 1)))
 
 
 def project(p_cam_m: FloatArray, cam: IntArray, rig: RigArrays) -> FloatArray:
@@ -116,7 +116,7 @@ def project_with_jacobian(p_cam_m: FloatArray, cam: IntArray, rig: RigArrays) ->
     B[..., 0, 0] = B[..., 1, 1] = 1.0 / Z
     B[..., 0, 2] = -x / Z
     B[..., 1, 2] = -y / Z
-    return uv, np.einsum("npij,npjk->npik", A, B)
+    return uv, A @ B
 
 
 def world_points(R_world_body: FloatArray, t_world_m: FloatArray, p_body_m: FloatArray) -> FloatArray:
@@ -132,14 +132,15 @@ def projection_jacobian(
 
     ``d p_world = -[R p_body]x dtheta + dp``, ``d p_cam = R_cam_world d p_world``, then the
     projection's own Jacobian (``project_with_jacobian``)."""
-    q = np.einsum("nij,npj->npi", R_world_body, p_body_m)
+    q = p_body_m @ np.transpose(R_world_body, (0, 2, 1))
     p_cam = to_camera(q + t_world_m[:, None], cam, rig)
     uv, dproj = project_with_jacobian(p_cam, cam, rig)
-    dworld = np.zeros((*q.shape[:2], 3, 6))
-    dworld[..., :3] = -skew(q)
-    dworld[..., 3:] = np.eye(3)
-    dcam = np.einsum("nij,npjk->npik", rig.R_cam_world[cam], dworld)
-    return uv, np.einsum("npij,npjk->npik", dproj, dcam)
+    # d(u, v)/d(dtheta, dp) = dproj R_cam_world [-[q]x, I]
+    dproj_world = dproj @ rig.R_cam_world[cam][:, None]  # (N, P, 2, 3)
+    J = np.empty((*q.shape[:2], 2, 6))
+    J[..., :3] = -(dproj_world @ skew(q))
+    J[..., 3:] = dproj_world
+    return uv, J
 
 
 def tag_corners_body(T_body_tag: FloatArray, size_m: float) -> FloatArray:

@@ -1,10 +1,12 @@
 """Level B: each frame's body pose from the tag corners every camera saw (multi-camera PnP).
 
-1. **Start**: per camera, ``cv2.solvePnPGeneric`` of its corners against the tags' body
+1. **Start**: ``cv2.solvePnPGeneric`` of one camera's corners against the tags' body
    coordinates (IPPE for one tag: both of its solutions; SQPnP for several), moved into the world
    through the camera's pose; with the previous frame's pose, the candidate with the lowest
-   (gated) reprojection cost over all cameras wins. One small tag alone can flip (IPPE's two
-   solutions are close in cost); the other cameras' tags decide.
+   (gated) reprojection cost over all cameras wins. The camera with the most tags goes first; the
+   others' candidates are added only when no candidate fits every camera within 5 sigma on
+   average (one small tag alone can flip: IPPE's two solutions are close in cost; the other
+   cameras' tags decide).
 2. **Joint Gauss-Newton** over all cameras' corners of the frame, batched over frames:
    ``min sum_n sum_c |uv_nc - pi_n(T_world_body p_c)|^2 / sigma_n^2`` (``pi_n``: detection n's
    camera with its distortion), world-side perturbations. This is the maximum-likelihood pose for
@@ -27,6 +29,9 @@ from .tags_io import TagInput
 
 MAX_ITERATIONS = 30
 MAX_OUTLIER_ROUNDS = 5
+# A start whose gated cost is at most this many sigma^2 per corner coordinate is good enough to
+# start Gauss-Newton from (a wrong flip costs tens to thousands); the other cameras' PnP is skipped.
+GOOD_START_Z2 = 25.0
 
 
 @dataclass
@@ -127,11 +132,7 @@ def gauss_newton(
         tk = np.where(active[k][:, None], t[k], 0.0)
         uv, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
         r = corners_px - uv
-        ww = np.where(use, w, 0.0)
-        H = np.zeros((F, 6, 6))
-        g = np.zeros((F, 6))
-        np.add.at(H, k, np.einsum("n,npai,npaj->nij", ww, J, J))
-        np.add.at(g, k, np.einsum("n,npai,npa->ni", ww, J, r))
+        H, g = _normal_equations(J, r, np.where(use, w, 0.0), k, F)
         ok = active & (np.abs(np.linalg.det(H)) > 0)
         step = np.zeros((F, 6))
         step[ok] = np.linalg.solve(H[ok], g[ok][..., None])[..., 0]
@@ -142,16 +143,32 @@ def gauss_newton(
     # The information at the final poses (one more evaluation, no step).
     Rk = np.where(active[k][:, None, None], R[k], np.eye(3))
     tk = np.where(active[k][:, None], t[k], 0.0)
-    _, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
-    H = np.zeros((F, 6, 6))
-    np.add.at(H, k, np.einsum("n,npai,npaj->nij", np.where(use, w, 0.0), J, J))
+    uv, J = projection_jacobian(Rk, tk, corners_b, cam, rig)
+    H, _ = _normal_equations(J, corners_px - uv, np.where(use, w, 0.0), k, F)
     return R[k], t[k], H[k], iterations
+
+
+def _normal_equations(
+    J: FloatArray, r: FloatArray, w: FloatArray, k: IntArray, F: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per frame ``H = sum w J^T J`` (F, 6, 6) and ``g = sum w J^T r`` (F, 6) from every detection's
+    corners: J (N, 4, 2, 6), r (N, 4, 2) [px], w (N,) [1/px^2], k (N,) frame of each."""
+    Jn = J.reshape(len(J), -1, 6)
+    JtW = np.transpose(Jn, (0, 2, 1)) * w[:, None, None]
+    H_n = JtW @ Jn
+    g_n = (JtW @ r.reshape(len(r), -1, 1))[..., 0]
+    H = np.zeros((F, 36))
+    g = np.zeros((F, 6))
+    for i in range(36):  # bincount per entry: much faster than np.add.at on (F, 6, 6)
+        H[:, i] = np.bincount(k, H_n.reshape(-1, 36)[:, i], minlength=F)
+    for i in range(6):
+        g[:, i] = np.bincount(k, g_n[:, i], minlength=F)
+    return H.reshape(F, 6, 6), g
 
 
 def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[FloatArray, FloatArray, BoolArray]:
     """Each frame's starting pose (see the module's step 1). Returns R (F, 3, 3), t (F, 3) and
     which frames have one."""
-    import cv2
 
     F = data.n_frames
     R = np.tile(np.eye(3), (F, 1, 1))
@@ -164,27 +181,48 @@ def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[Fl
         rows = np.arange(starts[f], starts[f + 1])
         if not len(rows):
             continue
+        # Cameras by their number of tags: the first one's PnP usually fits every camera; the
+        # others are tried only when it does not (a flip, a single small tag).
+        cams, counts = np.unique(data.det_cam[rows], return_counts=True)
+        order = cams[np.argsort(-counts, kind="stable")]
         cands: list[tuple[FloatArray, FloatArray]] = [] if prev is None else [prev]
-        for c in np.unique(data.det_cam[rows]):
-            mine = rows[data.det_cam[rows] == c]
-            obj = corners_b[data.det_tag[mine]].reshape(-1, 3)
-            img = data.corners_px[mine].reshape(-1, 2)
-            flag = cv2.SOLVEPNP_IPPE if len(mine) == 1 else cv2.SOLVEPNP_SQPNP
-            cam = data.cameras[int(c)]
-            try:
-                n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.dist, flags=flag)
-            except cv2.error:
+        best: tuple[FloatArray, FloatArray] | None = None
+        for batch in (order[:1], order[1:]):
+            for c in batch:
+                cands += _pnp_candidates(data, rows[data.det_cam[rows] == c], int(c), corners_b)
+            if not cands:
                 continue
-            for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
-                R_cb = cv2.Rodrigues(rv)[0]
-                cands.append((cam.R_world_cam @ R_cb, cam.R_world_cam @ tv.ravel() + cam.t_world_cam))
-        if not cands:
+            best, cost = _best_candidate(cands, rows, corners_b, data, rig, gate_sigma)
+            if cost <= GOOD_START_Z2 * 8 * len(rows):
+                break
+        if best is None:
             continue
-        best = _best_candidate(cands, rows, corners_b, data, rig, gate_sigma)
         R[f], t[f] = best
         ok[f] = True
         prev = best
     return R, t, ok
+
+
+def _pnp_candidates(
+    data: TagInput, mine: IntArray, c: int, corners_b: FloatArray
+) -> list[tuple[FloatArray, FloatArray]]:
+    """Body poses in the world from camera ``c``'s detections ``mine``: IPPE's two solutions for
+    one tag, SQPnP's one for several."""
+    import cv2
+
+    obj = corners_b[data.det_tag[mine]].reshape(-1, 3)
+    img = data.corners_px[mine].reshape(-1, 2)
+    flag = cv2.SOLVEPNP_IPPE if len(mine) == 1 else cv2.SOLVEPNP_SQPNP
+    cam = data.cameras[c]
+    try:
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.dist, flags=flag)
+    except cv2.error:
+        return []
+    out = []
+    for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
+        R_cb = cv2.Rodrigues(rv)[0]
+        out.append((cam.R_world_cam @ R_cb, cam.R_world_cam @ tv.ravel() + cam.t_world_cam))
+    return out
 
 
 def _best_candidate(
@@ -194,8 +232,9 @@ def _best_candidate(
     data: TagInput,
     rig: RigArrays,
     gate_sigma: float,
-) -> tuple[FloatArray, FloatArray]:
-    """The candidate pose with the lowest gated reprojection cost over the frame's detections."""
+) -> tuple[tuple[FloatArray, FloatArray], float]:
+    """The candidate pose with the lowest gated reprojection cost (sum of ``min(z^2, gate^2)`` over
+    the frame's corner coordinates, z in sigmas) and that cost."""
     K, n = len(cands), len(rows)
     Rc = np.array([c[0] for c in cands])
     tc = np.array([c[1] for c in cands])
@@ -207,4 +246,5 @@ def _best_candidate(
     z2 = np.sum((uv - data.corners_px[rows]) ** 2, axis=-1) / rig.sigma_px[data.det_cam[rows]][None, :, None] ** 2
     behind = (pc[..., 2] <= 0).reshape(K, n, 4)
     cost = np.where(behind | ~np.isfinite(z2), gate_sigma**2, np.minimum(z2, gate_sigma**2)).sum(axis=(1, 2))
-    return cands[int(np.argmin(cost))]
+    i = int(np.argmin(cost))
+    return cands[i], float(cost[i])
