@@ -206,3 +206,21 @@ def test_client_model_reads_the_tag_result() -> None:
     typed = result_model("marker-pose-graph").model_validate_json(result.model_dump_json())
     assert typed.model_dump(mode="json") == result.model_dump(mode="json")
     assert typed.level == "B" and typed.residuals.rms_px is not None  # type: ignore[attr-defined]
+
+
+def test_one_small_tag_a_frame_does_not_flip() -> None:
+    """One detection a frame (a random camera's random tag): IPPE's two poses fit one small tag
+    about equally; continuity with the previous frame picks the right one."""
+    sim = simulate_tags(TagSimConfig(frames=150, outlier_fraction=0.0, miss_fraction=0.0, gaps=0), 0)
+    rng = np.random.default_rng(0)
+    by_frame: dict[int, list[int]] = {}
+    for i, f in enumerate(sim.det_frame):
+        by_frame.setdefault(f, []).append(i)
+    keep = sorted(int(rng.choice(v)) for v in by_frame.values())
+    for name in ("det_frame", "det_cam", "det_tag", "corners_px", "outlier"):
+        setattr(sim, name, [getattr(sim, name)[i] for i in keep])
+    result = estimate_tag_poses(tags_from_json(sim.document()))
+    ev = evaluate(result, sim.truth())
+    assert ev["max_rot_deg"] < 10  # no flipped frame
+    assert ev["ratio"] <= 1.3 and ev["coverage"] >= 0.98
+    assert any("nearest the previous frame" in w for w in result.warnings)

@@ -66,6 +66,11 @@ def estimate_tag_poses(
             "the covariances are off by that factor (estimate_pixel_sigma: true estimates it)"
         )
     timing["per_frame_s"] = time.perf_counter() - clock
+    if fit.ambiguous.any():
+        warnings.append(
+            f"{int(fit.ambiguous.sum())} frames fitted two poses about equally (a small tag seen alone can flip): "
+            "the one nearest the previous frame's was kept; their covariances do not include the other"
+        )
     R, t, cov = fit.R, fit.t, fit.cov
     status = [STATUS_MEASURED if m else STATUS_MISSING for m in fit.measured]
     n_corners = 4 * int(fit.inlier.sum())

@@ -32,6 +32,10 @@ MAX_OUTLIER_ROUNDS = 5
 # A start whose gated cost is at most this many sigma^2 per corner coordinate is good enough to
 # start Gauss-Newton from (a wrong flip costs tens to thousands); the other cameras' PnP is skipped.
 GOOD_START_Z2 = 25.0
+# Two starts whose costs differ by less than this (a likelihood ratio of 100) fit equally well...
+AMBIGUITY_CHI2 = 2.0 * np.log(100.0)
+# ...and make the frame ambiguous when their rotations are this far apart [deg].
+AMBIGUITY_DEG = 10.0
 
 
 @dataclass
@@ -49,13 +53,14 @@ class FrameFit:
     iterations: int
     chi2: float
     dof: int
+    ambiguous: BoolArray  # (F,) two poses fitted the frame's tags; the one nearest the last frame's was kept
 
 
 def fit_tag_poses(data: TagInput, sigma_px: FloatArray, outlier_sigma: float) -> FrameFit:
     """Fit every frame of ``data``; sigma_px (C,): each camera's corner sigma [px]."""
     rig = _rig(data, sigma_px)
     corners_b = data.corners_body_m[data.det_tag]  # (N, 4, 3)
-    R, t, ok = initial_poses(data, rig, outlier_sigma)
+    R, t, ok, ambiguous = initial_poses(data, rig, outlier_sigma)
     inlier = ok[data.det_frame].copy()
     iterations = 0
     F = data.n_frames
@@ -89,7 +94,8 @@ def fit_tag_poses(data: TagInput, sigma_px: FloatArray, outlier_sigma: float) ->
     use = inlier & measured[data.det_frame]
     chi2 = float(np.sum((res[use] / rig.sigma_px[data.det_cam[use]][:, None, None]) ** 2))
     inlier &= measured[data.det_frame]
-    return FrameFit(R, t, cov, measured, inlier, res, iterations, chi2, int(8 * use.sum() - 6 * measured.sum()))
+    dof = int(8 * use.sum() - 6 * measured.sum())
+    return FrameFit(R, t, cov, measured, inlier, res, iterations, chi2, dof, ambiguous & measured)
 
 
 def _rig(data: TagInput, sigma_px: FloatArray) -> RigArrays:
@@ -166,9 +172,11 @@ def _normal_equations(
     return H.reshape(F, 6, 6), g
 
 
-def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """Each frame's starting pose (see the module's step 1). Returns R (F, 3, 3), t (F, 3) and
-    which frames have one."""
+def initial_poses(
+    data: TagInput, rig: RigArrays, gate_sigma: float
+) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+    """Each frame's starting pose (see the module's step 1). Returns R (F, 3, 3), t (F, 3), which
+    frames have one, and which were ambiguous (two poses fit; continuity chose)."""
 
     F = data.n_frames
     R = np.tile(np.eye(3), (F, 1, 1))
@@ -177,9 +185,11 @@ def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[Fl
     corners_b = data.corners_body_m
     starts = np.searchsorted(data.det_frame, np.arange(F + 1))
     prev: tuple[FloatArray, FloatArray] | None = None
+    ambiguous = np.zeros(F, dtype=bool)
     for f in range(F):
         rows = np.arange(starts[f], starts[f + 1])
         if not len(rows):
+            prev = None  # continuity is only trusted from one frame to the next
             continue
         # Cameras by their number of tags: the first one's PnP usually fits every camera; the
         # others are tried only when it does not (a flip, a single small tag).
@@ -192,15 +202,37 @@ def initial_poses(data: TagInput, rig: RigArrays, gate_sigma: float) -> tuple[Fl
                 cands += _pnp_candidates(data, rows[data.det_cam[rows] == c], int(c), corners_b)
             if not cands:
                 continue
-            best, cost = _best_candidate(cands, rows, corners_b, data, rig, gate_sigma)
-            if cost <= GOOD_START_Z2 * 8 * len(rows):
+            costs = _candidate_costs(cands, rows, corners_b, data, rig, gate_sigma)
+            best, ambiguous[f] = _pick(cands, costs, prev)
+            if costs.min() <= GOOD_START_Z2 * 8 * len(rows):
                 break
         if best is None:
             continue
         R[f], t[f] = best
         ok[f] = True
         prev = best
-    return R, t, ok
+    return R, t, ok, ambiguous
+
+
+def _pick(
+    cands: list[tuple[FloatArray, FloatArray]], costs: FloatArray, prev: tuple[FloatArray, FloatArray] | None
+) -> tuple[tuple[FloatArray, FloatArray], bool]:
+    """The start among candidates: the lowest cost, unless other candidates fit about as well
+    (a likelihood ratio under ``AMBIGUITY_CHI2``) with a rotation more than ``AMBIGUITY_DEG``
+    away: then the frame is ambiguous (one small tag's two IPPE poses) and the candidate nearest
+    the previous frame's pose is taken."""
+    from .geometry import log_so3
+
+    best = int(np.argmin(costs))
+    fits = np.flatnonzero(costs <= costs[best] + AMBIGUITY_CHI2)
+    Rb = cands[best][0]
+    apart = [i for i in fits if np.degrees(np.linalg.norm(log_so3(cands[i][0] @ Rb.T))) > AMBIGUITY_DEG]
+    if not apart:
+        return cands[best], False
+    if prev is not None:
+        dist = [np.linalg.norm(log_so3(cands[i][0] @ prev[0].T)) for i in fits]
+        return cands[int(fits[int(np.argmin(dist))])], True
+    return cands[best], True
 
 
 def _pnp_candidates(
@@ -225,16 +257,16 @@ def _pnp_candidates(
     return out
 
 
-def _best_candidate(
+def _candidate_costs(
     cands: list[tuple[FloatArray, FloatArray]],
     rows: IntArray,
     corners_b: FloatArray,
     data: TagInput,
     rig: RigArrays,
     gate_sigma: float,
-) -> tuple[tuple[FloatArray, FloatArray], float]:
-    """The candidate pose with the lowest gated reprojection cost (sum of ``min(z^2, gate^2)`` over
-    the frame's corner coordinates, z in sigmas) and that cost."""
+) -> FloatArray:
+    """Each candidate pose's gated reprojection cost: the sum of ``min(z^2, gate^2)`` over the
+    frame's corner coordinates, z in sigmas."""
     K, n = len(cands), len(rows)
     Rc = np.array([c[0] for c in cands])
     tc = np.array([c[1] for c in cands])
@@ -245,6 +277,6 @@ def _best_candidate(
     uv = project(pc, cam, rig).reshape(K, n, 4, 2)
     z2 = np.sum((uv - data.corners_px[rows]) ** 2, axis=-1) / rig.sigma_px[data.det_cam[rows]][None, :, None] ** 2
     behind = (pc[..., 2] <= 0).reshape(K, n, 4)
-    cost = np.where(behind | ~np.isfinite(z2), gate_sigma**2, np.minimum(z2, gate_sigma**2)).sum(axis=(1, 2))
-    i = int(np.argmin(cost))
-    return cands[i], float(cost[i])
+    return np.asarray(
+        np.where(behind | ~np.isfinite(z2), gate_sigma**2, np.minimum(z2, gate_sigma**2)).sum(axis=(1, 2))
+    )
