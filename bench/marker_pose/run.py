@@ -2,9 +2,10 @@
 constant-velocity prior) beside the paper's method (VC chain + pose graph), on the same
 simulated cases; then timings for 500 and 10,000 frames.
 
-    PYTHONPATH=service:client python -m bench.marker_pose.run [--seeds 5] [--quick]
+    PYTHONPATH=service:client python -m bench.marker_pose.run [--seeds 5] [--levels ABC] [--no-timing]
 
-Prints one table per layout mode and writes plots to bench/out/.
+Prints one table per layout mode (level A), one for tags (levels B and C, ``tags.py``) and writes
+plots to bench/out/.
 """
 
 from __future__ import annotations
@@ -202,15 +203,34 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--no-timing", action="store_true")
     parser.add_argument("--timing-only", action="store_true")
+    parser.add_argument("--levels", default="ABC", help="which levels to run (A: markers, B: tags, C: images)")
+    parser.add_argument("--seeds-c", type=int, default=3, help="seeds per motion at level C (rendering is slow)")
     args = parser.parse_args()
     print(f"marker-pose-graph bench on {machine()}\n{GOALS}")
-    for with_layout in () if args.timing_only else (True, False):
+    if not args.timing_only and ("B" in args.levels or "C" in args.levels):
+        from .tags import HEADER as TAG_HEADER
+        from .tags import level_b, level_c
+        from .tags import summary as tag_summary
+
+        runs = level_b(args.seeds) if "B" in args.levels else []
+        runs += level_c(args.seeds_c) if "C" in args.levels else []
+        print(
+            "\ntags (B: 500 frames of detections at 0.25 px; C: 30 frames of 4 x 1024 px images), "
+            "ratio against the per-frame tag bound (goal <= 1.3)\n" + table(tag_summary(runs), TAG_HEADER)
+        )
+        if "B" in args.levels and not args.no_timing:
+            from .tags import timings_b
+
+            header = ["frames", "detections", "method", "read wall/cpu", "estimate wall/cpu"]
+            print("\ntimings [s] (level B, tagged box)\n" + table(timings_b(), header))
+    for with_layout in () if args.timing_only or "A" not in args.levels else (True, False):
         name = "given layout" if with_layout else "bootstrapped layout"
         runs = accuracy(args.seeds, with_layout)
         print(f"\n{name} (500 frames, 50 Hz, sigma 2.9 mm, 3 resets = 4 segments)\n" + table(summary(runs), HEADER))
         plot(runs, name.replace(" ", "_"))
-    error_plot()
-    if not args.no_timing:
+    if "A" in args.levels:
+        error_plot()
+    if not args.no_timing and "A" in args.levels:
         print(
             "\ntimings [s] (kite, 4 markers)\n"
             + table(timings(), ["frames", "method", "per-frame only wall/cpu", "total wall/cpu"])

@@ -26,6 +26,8 @@ class FramePose(_Model):
     T_launch_body: PoseValue | None = None
     ypr_deg: list[float] | None = None
     residual_rms_m: float | None = None
+    n_tags: int | None = None  # levels B and C: inlier tag detections (over all cameras) in the frame
+    residual_rms_px: float | None = None  # levels B and C: RMS corner residual [px]
 
 
 class LayoutMarker(_Model):
@@ -60,20 +62,35 @@ class Rejection(_Model):
     frame: int
     track: str
     residual_m: float | None
+    residual_px: float | None = None  # levels B and C: the detection's largest corner residual [px]
     reason: str
 
 
 class Residuals(_Model):
-    rms_m: float
+    rms_m: float | None  # level A [m]; None for tags
     per_marker_rms_m: dict[str, float]
+    rms_px: float | None = None  # levels B and C: RMS corner residual [px]
+    per_tag_rms_px: dict[str, float] | None = None
     rejected: list[Rejection]
+
+
+class DetectionInfo(_Model):
+    detector: str
+    images: int
+    detections: int
+    known_tags: int
+    per_camera: dict[str, int]
+    time_s: float
 
 
 class MarkerPoseResult(_Model):
     kind: Literal["marker-pose-graph"] = "marker-pose-graph"
+    level: Literal["A", "B", "C"] = "A"
     method: str
     body_frame: str
-    point_sigma_m: float
+    point_sigma_m: float | None
+    pixel_sigma_px: dict[str, float] | None = None
+    detection: DetectionInfo | None = None
     motion_prior: str
     poses: list[FramePose]
     layout: LayoutInfo

@@ -22,41 +22,81 @@ app = typer.Typer(
 def simulate(
     out: Annotated[Path, typer.Option(help="output directory")] = Path("sim-markers"),
     seed: Annotated[int, typer.Option(min=0)] = 0,
-    level: Annotated[Literal["A"], typer.Option(help="A: 3D marker coordinates (B and C later)")] = "A",
-    target: Annotated[Literal["kite", "box"], typer.Option()] = "kite",
+    level: Annotated[
+        Literal["A", "B", "C"],
+        typer.Option(help="A: 3D marker coordinates; B: tag corner detections; C: tag images (a zip)"),
+    ] = "A",
+    target: Annotated[Literal["kite", "box"], typer.Option(help="level A's target (B and C: the tagged box)")] = "kite",
     motion: Annotated[Literal["paper", "tumble"], typer.Option()] = "paper",
-    frames: Annotated[int, typer.Option(min=10, max=200_000)] = 500,
-    layout: Annotated[bool, typer.Option(help="include the layout (body.markers)")] = True,
+    frames: Annotated[int | None, typer.Option(min=3, max=200_000, help="default: 500 (A, B), 20 (C)")] = None,
+    layout: Annotated[bool, typer.Option(help="level A: include the layout (body.markers)")] = True,
 ) -> None:
-    """Simulate the paper's 4-camera rig: writes markers.json and truth.json."""
-    from ..marker_pose.pipeline import write_simulation
+    """Simulate the paper's 4-camera rig: writes markers.json (A), tags.json (B) or images.zip (C),
+    and truth.json."""
+    from ..marker_pose.pipeline import write_simulation, write_tag_simulation
     from ..marker_pose.simulate import SimConfig
+    from ..marker_pose.tag_simulate import TagSimConfig
 
-    config = SimConfig(target=target, motion=motion, frames=frames, with_layout=layout)
-    markers, truth = write_simulation(out, config, seed)
-    typer.echo(f"wrote {markers} and {truth}")
+    if level == "A":
+        config = SimConfig(target=target, motion=motion, frames=max(frames or 500, 10), with_layout=layout)
+        written, truth = write_simulation(out, config, seed)
+    elif level == "B":
+        written, truth = write_tag_simulation(out, TagSimConfig(motion=motion, frames=frames or 500), seed)
+    else:
+        from ..marker_pose.tag_render import image_config, write_image_simulation
+
+        written, truth = write_image_simulation(out, image_config(motion=motion, frames=frames or 20), seed)
+    typer.echo(f"wrote {written} and {truth}")
 
 
 @app.command()
 @input_errors
 def estimate(
-    markers: Annotated[Path, typer.Argument(help="markers JSON (tumblescan.markers.v1) or CSV")],
-    layout: Annotated[Path | None, typer.Option(help="layout JSON {markers: [{id, xyz}]}")] = None,
-    method: Annotated[Literal["graph", "paper"], typer.Option()] = "graph",
+    markers: Annotated[
+        Path,
+        typer.Argument(
+            help="markers JSON (tumblescan.markers.v1) or CSV (level A), tags JSON (tumblescan.tags.v1, level B), "
+            "or a zip or directory of images with scene.json (level C); the level is read from the content"
+        ),
+    ],
+    layout: Annotated[Path | None, typer.Option(help="level A: layout JSON {markers: [{id, xyz}]}")] = None,
+    method: Annotated[Literal["graph", "paper"], typer.Option(help="level A only")] = "graph",
     motion_prior: Annotated[Literal["none", "constant_velocity"], typer.Option()] = "none",
-    body_frame: Annotated[Literal["layout", "launch"] | None, typer.Option()] = None,
-    point_sigma_m: Annotated[float | None, typer.Option()] = None,
+    body_frame: Annotated[Literal["layout", "launch"] | None, typer.Option(help="level A only")] = None,
+    point_sigma_m: Annotated[float | None, typer.Option(help="level A only")] = None,
+    pixel_sigma_px: Annotated[float | None, typer.Option(help="levels B and C: corner sigma [px]")] = None,
+    detector: Annotated[Literal["apriltag", "aruco"], typer.Option(help="level C only")] = "apriltag",
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
     report: Annotated[Path | None, typer.Option(help="write an HTML report here")] = None,
 ) -> None:
     """Estimate every frame's pose; --json prints exactly one JSON document."""
-    from ..marker_pose.options import MarkerPoseOptions
-    from ..marker_pose.pipeline import run
+    from ..errors import InputError
+    from ..marker_pose.options import ImagePoseOptions, MarkerPoseOptions, TagPoseOptions
+    from ..marker_pose.pipeline import input_level, run, run_tags
 
-    options = MarkerPoseOptions(
-        method=method, motion_prior=motion_prior, body_frame=body_frame, point_sigma_m=point_sigma_m
-    )
-    result = run(markers, layout=layout, options=options)
+    level = input_level(markers)
+    if level != "A":
+        level_a_only = {
+            "--layout": layout is not None,
+            "--method": method != "graph",
+            "--body-frame": body_frame is not None,
+            "--point-sigma-m": point_sigma_m is not None,
+        }
+        given = [name for name, used in level_a_only.items() if used]
+        if given:
+            raise InputError(f"{given[0]} applies to level A (markers) input only", field=given[0].lstrip("-"))
+    if level == "A":
+        options = MarkerPoseOptions(
+            method=method, motion_prior=motion_prior, body_frame=body_frame, point_sigma_m=point_sigma_m
+        )
+        result = run(markers, layout=layout, options=options)
+    elif level == "B":
+        result = run_tags(markers, options=TagPoseOptions(motion_prior=motion_prior, pixel_sigma_px=pixel_sigma_px))
+    else:
+        from ..marker_pose.pipeline import run_images
+
+        opts = ImagePoseOptions(motion_prior=motion_prior, pixel_sigma_px=pixel_sigma_px, detector=detector)
+        result = run_images(markers, options=opts)
     if report is not None:
         from ..marker_pose.report import build_report
 
@@ -66,10 +106,13 @@ def estimate(
         return
     measured = sum(p.status == "measured" for p in result.poses)
     bridged = sum(p.status == "bridged" for p in result.poses)
+    from ..marker_pose.report import residual_text
+
     typer.echo(
-        f"{len(result.poses)} frames, {measured} measured (coverage {result.coverage:.3f}), {bridged} bridged, "
-        f"residual RMS {1000 * result.residuals.rms_m:.2f} mm, layout {result.layout.source} "
-        f"({len(result.layout.markers)} markers), graph {result.graph.iterations} iterations"
+        f"level {result.level}: {len(result.poses)} frames, {measured} measured (coverage {result.coverage:.3f}), "
+        f"{bridged} bridged, residual RMS {residual_text(result)}, layout {result.layout.source} "
+        f"({len(result.layout.markers)} {'tags' if result.level != 'A' else 'markers'}), "
+        f"{result.graph.iterations} iterations"
     )
     for w in result.warnings:
         typer.echo(f"warning: {w}")

@@ -9,9 +9,41 @@ from pathlib import Path
 from .._typing import Progress, no_progress
 from .estimate import estimate_poses
 from .markers_io import MarkerInput, read_markers
-from .options import MarkerPoseLimits, MarkerPoseOptions
+from .options import ImagePoseOptions, MarkerPoseLimits, MarkerPoseOptions, TagPoseOptions
 from .result import MarkerPoseResult
 from .simulate import SimConfig, simulate
+from .tag_estimate import estimate_tag_poses
+from .tag_simulate import TagSimConfig, simulate_tags
+from .tags_io import TagInput, read_tags
+
+TAGS_FORMAT = b"tumblescan.tags.v1"
+
+
+def input_level(path: Path) -> str:
+    """'A' (markers JSON or CSV), 'B' (a tumblescan.tags.v1 JSON) or 'C' (a zip or a directory of
+    images with scene.json), from the first bytes (names are not trusted)."""
+    if path.is_dir():
+        return "C"
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    if head.startswith(b"PK\x03\x04"):
+        return "C"
+    return "B" if TAGS_FORMAT in head else "A"
+
+
+def load_tags(tags: Path, limits: MarkerPoseLimits | None = None) -> TagInput:
+    """Read and validate level B (every refusal is an ``InputError`` naming the field)."""
+    return read_tags(tags, limits)
+
+
+def run_tags(
+    tags: Path,
+    *,
+    options: TagPoseOptions | None = None,
+    limits: MarkerPoseLimits | None = None,
+    progress: Progress = no_progress,
+) -> MarkerPoseResult:
+    return estimate_tag_poses(load_tags(tags, limits), options, progress)
 
 
 def load_input(
@@ -47,3 +79,40 @@ def write_simulation(out: Path, config: SimConfig, seed: int) -> tuple[Path, Pat
     truth["seed"] = seed
     (out / "truth.json").write_text(json.dumps(truth))
     return out / "markers.json", out / "truth.json"
+
+
+def write_tag_simulation(out: Path, config: TagSimConfig, seed: int) -> tuple[Path, Path]:
+    """Simulate level B and write tags.json and truth.json into ``out``."""
+    sim = simulate_tags(config, seed)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tags.json").write_text(json.dumps(sim.document()))
+    truth = sim.truth()
+    truth["seed"] = seed
+    (out / "truth.json").write_text(json.dumps(truth))
+    return out / "tags.json", out / "truth.json"
+
+
+def run_images(
+    images: Path,
+    *,
+    options: ImagePoseOptions | None = None,
+    limits: MarkerPoseLimits | None = None,
+    progress: Progress = no_progress,
+) -> MarkerPoseResult:
+    """Level C: detect the tags in every image of a zip or directory, then level B."""
+    import time
+
+    import numpy as np
+
+    from .errors import TooFewFramesError
+    from .images_io import detect_tags, read_image_set
+
+    options = options or ImagePoseOptions()
+    image_set = read_image_set(images, limits)
+    clock = time.perf_counter()
+    data, info = detect_tags(image_set, options, progress)
+    timing = {"detect_s": time.perf_counter() - clock}
+    n = len(np.unique(data.det_frame))
+    if n < 3:
+        raise TooFewFramesError(f"tags of the layout were found in {n} frames; at least 3 are needed", field="images")
+    return estimate_tag_poses(data, options, progress, level="C", detection=info, timing=timing)

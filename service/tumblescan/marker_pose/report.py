@@ -38,19 +38,21 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
     fig3d.update_layout(scene={"aspectmode": "data"}, height=500)
     sections = [
         table_html(
-            ["method", "body frame", "frames", "measured", "coverage", "residual RMS [mm]", "graph"],
+            ["level", "method", "body frame", "frames", "measured", "coverage", "residual RMS", "graph"],
             [
                 [
+                    result.level,
                     result.method,
                     result.body_frame,
                     len(result.poses),
                     sum(p.status == "measured" for p in result.poses),
                     f"{result.coverage:.3f}",
-                    f"{1000 * result.residuals.rms_m:.2f}",
+                    residual_text(result),
                     f"{result.graph.solver}, {result.graph.iterations} it, {result.graph.time_s:.2f} s",
                 ]
             ],
         ),
+        _detection_html(result),
         "<h2>Trajectory</h2>",
         figure_html(fig3d, "trajectory"),
     ]
@@ -76,13 +78,37 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
             fig.add_trace(go.Scatter(x=t, y=values[:, j], mode="lines", name=f"{label} [{unit}]"))
         fig.update_layout(xaxis_title="t [s]", height=350)
         sections += [f"<h2>{name}</h2>", figure_html(fig, name.split()[0].lower())]
-    sections += [
-        "<h2>Residuals per marker</h2>",
-        table_html(
-            ["marker", "RMS [mm]"], [[k, f"{1000 * v:.2f}"] for k, v in result.residuals.per_marker_rms_m.items()]
-        ),
-        f"<p>{len(result.residuals.rejected)} observations rejected.</p>",
-    ]
+    if result.residuals.per_tag_rms_px is not None:
+        rows = [[k, f"{v:.3f}"] for k, v in result.residuals.per_tag_rms_px.items()]
+        sections += ["<h2>Residuals per tag</h2>", table_html(["tag", "corner RMS [px]"], rows)]
+    else:
+        rows = [[k, f"{1000 * v:.2f}"] for k, v in result.residuals.per_marker_rms_m.items()]
+        sections += ["<h2>Residuals per marker</h2>", table_html(["marker", "RMS [mm]"], rows)]
+    sections.append(f"<p>{len(result.residuals.rejected)} observations rejected.</p>")
     if result.warnings:
         sections.append("<h2>Warnings</h2>" + "".join(f"<p class='warn'>{w}</p>" for w in result.warnings))
     return page(title, sections)
+
+
+def residual_text(result: MarkerPoseResult) -> str:
+    """The overall residual with its unit: mm for markers, px for tag corners."""
+    if result.residuals.rms_m is not None:
+        return f"{1000 * result.residuals.rms_m:.2f} mm"
+    if result.residuals.rms_px is not None:
+        return f"{result.residuals.rms_px:.3f} px"
+    return "-"
+
+
+def _detection_html(result: MarkerPoseResult) -> str:
+    """Level C: what the detector found; levels B and C: the corner sigma used."""
+    parts = []
+    d = result.detection
+    if d is not None:
+        parts.append(
+            f"<p>Tags detected by {d.detector} in {d.images} images: {d.detections} detections, "
+            f"{d.known_tags} of the layout's tags, in {d.time_s:.1f} s.</p>"
+        )
+    if result.pixel_sigma_px:
+        sig = ", ".join(f"{k} {v:.3f}" for k, v in result.pixel_sigma_px.items())
+        parts.append(f"<p>Corner sigma per camera [px]: {sig}.</p>")
+    return "".join(parts)

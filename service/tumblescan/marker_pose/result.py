@@ -22,6 +22,8 @@ class FramePose(BaseModel):
     T_launch_body: PoseValue | None = None
     ypr_deg: list[float] | None = None  # ZYX angles of T_launch_body
     residual_rms_m: float | None = None
+    n_tags: int | None = None  # levels B and C: inlier tag detections (over all cameras) in the frame
+    residual_rms_px: float | None = None  # levels B and C: RMS corner residual [px]
 
 
 class LayoutMarker(BaseModel):
@@ -58,22 +60,39 @@ class Rejection(BaseModel):
     frame: int
     track: str
     residual_m: float | None
+    residual_px: float | None = None  # levels B and C: the detection's largest corner residual [px]
     reason: Literal["residual", "conflict"]
 
 
 class Residuals(BaseModel):
-    rms_m: float
+    rms_m: float | None  # level A [m]; None for tags
     per_marker_rms_m: dict[str, float]
+    rms_px: float | None = None  # levels B and C: RMS corner residual [px]
+    per_tag_rms_px: dict[str, float] | None = None
     rejected: list[Rejection]
+
+
+class DetectionInfo(BaseModel):
+    """Level C: what the tag detector found in the images."""
+
+    detector: str
+    images: int
+    detections: int
+    known_tags: int  # detections of a tag in the layout
+    per_camera: dict[str, int]
+    time_s: float
 
 
 class MarkerPoseResult(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     kind: Literal["marker-pose-graph"] = "marker-pose-graph"
+    level: Literal["A", "B", "C"] = "A"  # A: markers, B: tag corners, C: images
     method: Literal["graph", "paper"]
     body_frame: Literal["layout", "launch"]
-    point_sigma_m: float
+    point_sigma_m: float | None  # level A's marker sigma [m]; None for tags
+    pixel_sigma_px: dict[str, float] | None = None  # levels B and C: corner sigma per camera [px]
+    detection: DetectionInfo | None = None
     motion_prior: str
     poses: list[FramePose]
     layout: LayoutInfo

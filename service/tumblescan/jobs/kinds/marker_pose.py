@@ -9,15 +9,29 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from ..kind import ArtifactSpec, FinishedJob, InputForm, InputPart, JobContext, JobOutput, Submission
+from ..kind import ArtifactSpec, FinishedJob, InputForm, InputPart, JobContext, JobOutput, Submission, form_named
 
 MARKERS_FILE = "input-markers.json"
+TAGS_FILE = "input-tags.json"
+TAGS_FORMAT = "tumblescan.tags.v1"
 
 
 def _options() -> type[BaseModel]:
     from ...marker_pose.options import MarkerPoseOptions
 
     return MarkerPoseOptions
+
+
+def _tag_options() -> type[BaseModel]:
+    from ...marker_pose.options import TagPoseOptions
+
+    return TagPoseOptions
+
+
+def _image_options() -> type[BaseModel]:
+    from ...marker_pose.options import ImagePoseOptions
+
+    return ImagePoseOptions
 
 
 def _limits() -> type[BaseModel]:
@@ -52,20 +66,59 @@ class MarkerPoseGraph:
                 "required": ["observations"],
             },
         ),
+        InputForm(
+            name="tags",
+            description="level B: tag corner detections from calibrated cameras (tumblescan.tags.v1 JSON)",
+            options=_tag_options(),
+            parts=(InputPart("tags", "cameras, tag layout and corner detections (tumblescan.tags.v1)", ("json",)),),
+            json_input=True,
+            json_schema={
+                "type": "object",
+                "description": "a tumblescan.tags.v1 document (see docs/marker_pose.md)",
+                "properties": {
+                    "format": {"const": TAGS_FORMAT},
+                    "cameras": {"type": "array"},
+                    "tags": {"type": "object"},
+                    "detections": {"type": "array"},
+                },
+                "required": ["format", "cameras", "tags", "detections"],
+            },
+        ),
+        InputForm(
+            name="images",
+            description="level C: a zip of scene.json (level B without detections, with frames) and "
+            "images/<camera>/<frame:06d>.png",
+            options=_image_options(),
+            parts=(InputPart("images", "zip of scene.json and images/<camera>/<frame:06d>.png", ("zip",)),),
+        ),
     )
     result_model = _result()
     artifacts: tuple[ArtifactSpec, ...] = ()  # the HTML report is served by the job layer
     limits_model = _limits()
 
     def form_of(self, files: Mapping[str, list[Path]], payload: Any) -> InputForm:
-        # Unknown fields and a missing 'markers' part are the service's checks (one form, JSON or upload).
-        return self.forms[0]
+        # A JSON input is a tags document by its format tag, else markers; an upload by its parts
+        # (the service checks the parts each form requires).
+        if payload is not None:
+            is_tags = isinstance(payload, dict) and payload.get("format") == TAGS_FORMAT
+            return form_named(self, "tags" if is_tags else "markers")
+        if "images" in files:
+            return form_named(self, "images")
+        return form_named(self, "tags" if "tags" in files else "markers")
 
     def accept(self, sub: Submission) -> dict[str, str]:
         from ...marker_pose.markers_io import markers_from_json
         from ...marker_pose.pipeline import load_input
 
         options = sub.options
+        if sub.form.name == "tags":
+            return self._accept_tags(sub)
+        if sub.form.name == "images":
+            from ...marker_pose.images_io import check_images, read_image_set
+
+            archive = sub.files["images"][0]
+            check_images(read_image_set(archive, sub.limits))  # type: ignore[arg-type]
+            return {"images": str(archive.relative_to(sub.job_dir))}
         if sub.payload is not None:
             markers_from_json(sub.payload, point_sigma_m=getattr(options, "point_sigma_m", None), limits=sub.limits)  # type: ignore[arg-type]
             sub.save(MARKERS_FILE, json.dumps(sub.payload).encode())
@@ -77,10 +130,30 @@ class MarkerPoseGraph:
             out["layout"] = str(layout.relative_to(sub.job_dir))
         return out
 
-    def run(self, ctx: JobContext) -> JobOutput:
-        from ...marker_pose.options import MarkerPoseOptions
-        from ...marker_pose.pipeline import run
+    def _accept_tags(self, sub: Submission) -> dict[str, str]:
+        from ...marker_pose.tags_io import read_tags, tags_from_json
 
+        if sub.payload is not None:
+            tags_from_json(sub.payload, limits=sub.limits)  # type: ignore[arg-type]
+            sub.save(TAGS_FILE, json.dumps(sub.payload).encode())
+            return {"tags": TAGS_FILE}
+        read_tags(sub.files["tags"][0], sub.limits)  # type: ignore[arg-type]
+        return {"tags": str(sub.files["tags"][0].relative_to(sub.job_dir))}
+
+    def run(self, ctx: JobContext) -> JobOutput:
+        from ...marker_pose.options import ImagePoseOptions, MarkerPoseOptions, TagPoseOptions
+        from ...marker_pose.pipeline import run, run_images, run_tags
+
+        if "tags" in ctx.inputs:
+            tag_result = run_tags(
+                ctx.inputs["tags"], options=TagPoseOptions.model_validate(ctx.options), progress=ctx.progress
+            )
+            return JobOutput(result=tag_result.model_dump(mode="json"))
+        if "images" in ctx.inputs:
+            image_result = run_images(
+                ctx.inputs["images"], options=ImagePoseOptions.model_validate(ctx.options), progress=ctx.progress
+            )
+            return JobOutput(result=image_result.model_dump(mode="json"))
         options = MarkerPoseOptions.model_validate(ctx.options)
         result = run(ctx.inputs["markers"], layout=ctx.inputs.get("layout"), options=options, progress=ctx.progress)
         return JobOutput(result=result.model_dump(mode="json"))
