@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import html
+from typing import Any
+
 import numpy as np
 
 from ..report import figure_html, page, table_html
@@ -35,7 +38,12 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
                 text=[m.id for m in result.layout.markers],
             )
         )
-    fig3d.update_layout(scene={"aspectmode": "data"}, height=500)
+    # Eye further out than plotly's default, which crops a flat trajectory's scene at the bottom.
+    fig3d.update_layout(
+        scene={"aspectmode": "data", "camera": {"eye": {"x": 1.8, "y": 1.8, "z": 1.2}}},
+        height=550,
+        margin={"l": 0, "r": 0, "t": 20, "b": 0},
+    )
     sections = [
         table_html(
             ["level", "method", "body frame", "frames", "measured", "coverage", "residual RMS", "graph"],
@@ -56,28 +64,16 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
         "<h2>Trajectory</h2>",
         figure_html(fig3d, "trajectory"),
     ]
-    for name, values, s_idx, unit, scale in (
-        ("Attitude (ZYX, launch frame)", ypr, (2, 1, 0), "deg", None),
-        ("Position (world)", pos, (3, 4, 5), "m", 1.0),
+    for name, values, s_idx, labels, unit, sigma_unit, sigma_scale in (
+        ("Attitude (ZYX, launch frame)", ypr, (2, 1, 0), ("yaw", "pitch", "roll"), "deg", "deg", np.degrees(1.0)),
+        ("Position (world)", pos, (3, 4, 5), ("x", "y", "z"), "m", "mm", 1000.0),
     ):
-        fig = go.Figure()
-        for j, label in enumerate(("yaw", "pitch", "roll") if unit == "deg" else ("x", "y", "z")):
-            s = 3 * sig[:, s_idx[j]] * (np.degrees(1.0) if scale is None else scale) if len(sig) else np.zeros(0)
-            fig.add_trace(go.Scatter(x=t, y=values[:, j] + s, mode="lines", line={"width": 0}, showlegend=False))
-            fig.add_trace(
-                go.Scatter(
-                    x=t,
-                    y=values[:, j] - s,
-                    mode="lines",
-                    line={"width": 0},
-                    fill="tonexty",
-                    name=f"{label} 3-sigma",
-                    opacity=0.3,
-                )
-            )
-            fig.add_trace(go.Scatter(x=t, y=values[:, j], mode="lines", name=f"{label} [{unit}]"))
-        fig.update_layout(xaxis_title="t [s]", height=350)
-        sections += [f"<h2>{name}</h2>", figure_html(fig, name.split()[0].lower())]
+        sections += [
+            f"<h2>{name}</h2>",
+            figure_html(
+                _series_figure(t, values, sig, s_idx, labels, unit, sigma_unit, sigma_scale), name.split()[0].lower()
+            ),
+        ]
     if result.residuals.per_tag_rms_px is not None:
         rows = [[k, f"{v:.3f}"] for k, v in result.residuals.per_tag_rms_px.items()]
         sections += ["<h2>Residuals per tag</h2>", table_html(["tag", "corner RMS [px]"], rows)]
@@ -86,7 +82,7 @@ def build_report(result: MarkerPoseResult, title: str) -> str:
         sections += ["<h2>Residuals per marker</h2>", table_html(["marker", "RMS [mm]"], rows)]
     sections.append(f"<p>{len(result.residuals.rejected)} observations rejected.</p>")
     if result.warnings:
-        sections.append("<h2>Warnings</h2>" + "".join(f"<p class='warn'>{w}</p>" for w in result.warnings))
+        sections.append("<h2>Warnings</h2>" + "".join(f"<p class='warn'>{html.escape(w)}</p>" for w in result.warnings))
     return page(title, sections)
 
 
@@ -112,3 +108,49 @@ def _detection_html(result: MarkerPoseResult) -> str:
         sig = ", ".join(f"{k} {v:.3f}" for k, v in result.pixel_sigma_px.items())
         parts.append(f"<p>Corner sigma per camera [px]: {sig}.</p>")
     return "".join(parts)
+
+
+PALETTE = ("#1f77b4", "#d62728", "#2ca02c")
+
+
+def _series_figure(
+    t: np.ndarray,
+    values: np.ndarray,
+    sig: np.ndarray,
+    s_idx: tuple[int, int, int],
+    labels: tuple[str, str, str],
+    unit: str,
+    sigma_unit: str,
+    sigma_scale: float,
+) -> Any:
+    """Three components over time (top) and their 3σ (bottom, in ``sigma_unit``), one colour per
+    component: a 3σ band drawn around a curve that spans tens of degrees would be thinner than the
+    line, so the uncertainty gets its own axis."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, row_heights=[0.65, 0.35], vertical_spacing=0.06)
+    for j, label in enumerate(labels):
+        colour = PALETTE[j]
+        fig.add_trace(
+            go.Scatter(x=t, y=values[:, j], mode="lines", line={"color": colour}, name=f"{label} [{unit}]"),
+            row=1,
+            col=1,
+        )
+        three_sigma = 3 * sig[:, s_idx[j]] * sigma_scale if len(sig) else np.zeros(0)
+        fig.add_trace(
+            go.Scatter(
+                x=t,
+                y=three_sigma,
+                mode="lines",
+                line={"color": colour, "dash": "dot"},
+                name=f"{label} 3-sigma [{sigma_unit}]",
+            ),
+            row=2,
+            col=1,
+        )
+    fig.update_yaxes(title_text=unit, row=1, col=1)
+    fig.update_yaxes(title_text=f"3-sigma [{sigma_unit}]", rangemode="tozero", row=2, col=1)
+    fig.update_xaxes(title_text="t [s]", row=2, col=1)
+    fig.update_layout(height=450, margin={"t": 20})
+    return fig
