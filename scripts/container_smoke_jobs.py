@@ -34,10 +34,10 @@ class Job:
 
 @dataclass(frozen=True)
 class Recipe:
-    """How to make a kind's input with the image's own CLI (a command line, split on spaces, that
-    writes into the directory ``{out}`` names) and which jobs to submit from it."""
+    """How to make a kind's input with the image's own CLI (command lines, split on spaces, that
+    write into the directory ``{out}`` names) and which jobs to submit from it."""
 
-    simulate: str
+    simulate: str | tuple[str, ...]
     jobs: list[Job]
 
 
@@ -56,8 +56,16 @@ RECIPES: dict[str, Recipe] = {
         jobs=[Job("near range", {"meta": "meta.json", "image": "image.png"})],
     ),
     "marker-pose-graph": Recipe(
-        simulate="tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 200",
-        jobs=[Job("level A markers", {"markers": "markers.json"})],
+        simulate=(
+            "tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 200",
+            "tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 100 --level B",
+            "tumblescan marker-pose-graph simulate --out {out} --seed 3 --frames 6 --level C",
+        ),
+        jobs=[
+            Job("level A markers", {"markers": "markers.json"}),
+            Job("level B tags", {"tags": "tags.json"}),
+            Job("level C images", {"images": "images.zip"}),
+        ],
     ),
     "spin-from-images": Recipe(
         simulate="tumblescan spin-from-images simulate --out {out} --seed 3 --width-px 256 --frames 12",
@@ -97,13 +105,10 @@ def main() -> int:
                 recipe = RECIPES[kind]
                 out = Path(tmp) / kind
                 t0 = time.monotonic()
-                cmd = [arg.replace("{out}", str(out)) for arg in recipe.simulate.split()]
-                sim = subprocess.run(cmd, capture_output=True, text=True)
-                sim_s = time.monotonic() - t0
-                if sim.returncode != 0:
-                    print(f"FAIL: {kind}: {' '.join(cmd)} exited {sim.returncode}:\n{sim.stderr}", file=sys.stderr)
+                if not simulate(kind, recipe, out):
                     failures += len(recipe.jobs)
                     continue
+                sim_s = time.monotonic() - t0
                 for job in recipe.jobs:
                     status, seconds = run_job(http, kind, job, out, timeout_s)
                     failures += status != "succeeded"
@@ -116,6 +121,18 @@ def main() -> int:
         return 1
     print(f"all {len(rows)} job(s) of {len(kinds)} kind(s) succeeded")
     return 0
+
+
+def simulate(kind: str, recipe: Recipe, out: Path) -> bool:
+    """Run the recipe's simulate command(s); False (the failure printed) if one fails."""
+    commands = (recipe.simulate,) if isinstance(recipe.simulate, str) else recipe.simulate
+    for command in commands:
+        cmd = [arg.replace("{out}", str(out)) for arg in command.split()]
+        sim = subprocess.run(cmd, capture_output=True, text=True)
+        if sim.returncode != 0:
+            print(f"FAIL: {kind}: {' '.join(cmd)} exited {sim.returncode}:\n{sim.stderr}", file=sys.stderr)
+            return False
+    return True
 
 
 def registered_kinds(http: httpx.Client) -> list[str]:
