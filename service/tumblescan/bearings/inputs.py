@@ -124,6 +124,8 @@ def load_json(data: bytes | str, *, field: str = "input") -> Any:
         return json.loads(data, parse_constant=_NonFinite)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidBearingsInputError(f"{field} is not valid JSON ({exc})", field=field) from None
+    except RecursionError:
+        raise InvalidBearingsInputError(f"{field}: the JSON nests too deeply to read", field=field) from None
 
 
 def read_input(path: Path, limits: Limits | None = None) -> BearingsInput:
