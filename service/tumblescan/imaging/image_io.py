@@ -30,14 +30,42 @@ def write_image(path: Path, image: np.ndarray) -> None:
         raise OSError(f"could not write {path}")
 
 
+def _quiet_cv2() -> None:
+    """OpenCV's decoder logs a warning on stderr for a truncated file (``PNG input buffer is
+    incomplete``) before returning nothing; this module says what is wrong itself, in one
+    line, so OpenCV keeps only its errors."""
+    import cv2
+
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is not None:
+        logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+
+
+def _png_size_px(data: np.ndarray) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk (bytes 16-23, big-endian), or None if not a PNG."""
+    if data.size < 24 or data[:8].tobytes() != b"\x89PNG\r\n\x1a\n":
+        return None
+    head = data[16:24].tobytes()
+    return int.from_bytes(head[:4], "big"), int.from_bytes(head[4:], "big")
+
+
 def read_image(path: Path, field: str = "image") -> np.ndarray:
     """The image's pixel array as stored (uint8/uint16, (H, W) or (H, W, C)); ``UnreadableImageError``
-    when the file is missing or not an image OpenCV or tifffile can decode."""
+    when the file is missing or not an image OpenCV or tifffile can decode. A PNG whose header
+    declares more than ``MAX_PIXELS`` is refused before it is decoded (a few MB of zeros can
+    declare gigabytes of pixels)."""
     import cv2
 
     if not path.is_file():
         raise UnreadableImageError(f"{field}: no such file {path}", field=field)
+    _quiet_cv2()
     data = np.fromfile(path, dtype=np.uint8)
+    size = _png_size_px(data)
+    if size is not None and size[0] * size[1] > MAX_PIXELS:
+        raise InputError(
+            f"{field}: {path.name} declares {size[0]}x{size[1]} px, over the {MAX_PIXELS // 1_000_000} Mpx limit",
+            field=field,
+        )
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None and data[:4].tobytes() in (b"II*\x00", b"MM\x00*"):
         try:
