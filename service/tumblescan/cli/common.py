@@ -32,8 +32,13 @@ def input_errors(fn: F) -> F:
             raise fail(str(exc)) from None
         except FileNotFoundError as exc:
             raise fail(f"no such file: {exc.filename}") from None
-        except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+        except IsADirectoryError as exc:  # a rename names its target second
+            raise fail(f"{exc.filename2 or exc.filename} is a directory, not a file") from None
+        except UnicodeDecodeError as exc:
             raise fail(str(exc)) from None
+        except OSError as exc:  # permission denied, a read-only or full disk: one line all the same
+            where = exc.filename2 or exc.filename
+            raise fail(f"{where}: {exc.strerror or exc}" if where else str(exc)) from None
 
     return wrapper  # type: ignore[return-value]
 

@@ -183,9 +183,13 @@ def submit(
         opts = json.loads(options)
     except json.JSONDecodeError as exc:
         raise fail(f"--options is not valid JSON: {exc.msg}") from None
+    _check_outputs(wait, timeout, out, artifacts)
     try:
         with Client(url, api_key=api_key) as client:
-            parts = _parts(files, client.kinds.get(kind).upload_parts(), {"cloud": cloud, "truth": truth})
+            spec = client.kinds.get(kind)
+            if out is not None and "cloud" not in {a.name for a in spec.artifacts}:
+                raise fail(f"--out writes the rectified cloud, and {kind} has none; use --artifacts DIR")
+            parts = _parts(files, spec.upload_parts(), {"cloud": cloud, "truth": truth})
             job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
@@ -199,7 +203,9 @@ def submit(
                 )
                 raise typer.Exit(1)
             typer.echo(json.dumps(job.result, indent=2))
-            if out is not None and job.artifacts.cloud:
+            if out is not None and not job.artifacts.cloud:
+                raise fail(f"job {job.id} has no rectified cloud (tracks need --cloud); nothing written to {out}")
+            if out is not None:
                 client.jobs.download_cloud(job.id, out)
                 typer.echo(f"wrote {out}", err=True)
             if artifacts is not None:
@@ -209,6 +215,23 @@ def submit(
                     typer.echo(f"wrote {target}", err=True)
     except TumblescanError as exc:
         raise typer.Exit(_client_error(exc)) from None
+    except OSError as exc:  # a download target that cannot be written
+        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+
+
+def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path | None) -> None:
+    """Refuse, before anything is submitted, what could only fail (or be ignored) after the
+    job has run: outputs without --wait, a timeout that cannot be waited, targets that cannot
+    be written."""
+    if timeout <= 0:
+        raise fail(f"--timeout must be more than 0 s (got {timeout:g})")
+    for flag, given in (("--out", out), ("--artifacts", artifacts)):
+        if given is not None and not wait:
+            raise fail(f"{flag} needs --wait (the files exist once the job has succeeded)")
+    if out is not None and (out.is_dir() or not out.parent.is_dir()):
+        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
+    if artifacts is not None and artifacts.exists() and not artifacts.is_dir():
+        raise fail(f"--artifacts {artifacts}: exists and is not a directory")
 
 
 def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
@@ -223,6 +246,8 @@ def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> 
             parts.setdefault(name, []).append(given)
     for paths in parts.values():
         for path in paths:
+            if path.is_dir():
+                raise fail(f"{path} is a directory; give its files (PART=FILE, one per file) or a zip")
             if not path.is_file():
                 raise fail(f"no such file: {path}")
     return parts
