@@ -36,6 +36,8 @@ def input_errors(fn: F) -> F:
             raise fail(f"{exc.filename2 or exc.filename} is a directory, not a file") from None
         except UnicodeDecodeError as exc:
             raise fail(str(exc)) from None
+        except RecursionError:  # json gives up on input nested near 1000 levels deep
+            raise fail("an input file's JSON nests too deeply to read") from None
         except OSError as exc:  # permission denied, a read-only or full disk: one line all the same
             where = exc.filename2 or exc.filename
             raise fail(f"{where}: {exc.strerror or exc}" if where else str(exc)) from None
