@@ -168,5 +168,8 @@ def test_format_npz_on_an_artifact_that_is_not_a_ply_is_refused(client: TestClie
     d = detail(client.get(f"/v1/jobs/{job.id}/artifacts/overlay", params={"format": "npz"}))
     assert d["field"] == "format" and "PLY" in d["message"]
     assert client.get(f"/v1/jobs/{job.id}/artifacts/overlay").status_code == 200
+    # Each artifact says what to save it as: the CLI saved linescan's cloud as cloud.bin.
+    listed = {a["name"]: a["filename"] for a in client.get(f"/v1/jobs/{job.id}/artifacts").json()}
+    assert listed == {"overlay": "overlay.png", "report": "report.html"}
     d = detail(client.get(f"/v1/jobs/{job.id}/cloud"), 404)
     assert "panel-axis writes none" in d["message"]

@@ -254,6 +254,8 @@ def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> 
 
 
 def _artifact_file(artifact: Any) -> str:
+    if getattr(artifact, "filename", None):  # the service names it with the stored file's extension
+        return str(Path(artifact.filename).name)
     suffix = {"text/html": ".html", "application/json": ".json", "image/png": ".png"}.get(artifact.media_type, "")
     return artifact.name + ("" if "." in artifact.name else suffix or ".bin")
 

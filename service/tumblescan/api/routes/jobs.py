@@ -158,14 +158,14 @@ def list_artifacts(job_id: str, request: Request, service: ServiceDep, caller: C
     base = f"{base_url(request)}/v1/jobs/{job_id}/artifacts"
     items = [
         ArtifactPublic(name=name, media_type=specs[name].media_type, description=specs[name].description,
-                       url=f"{base}/{name}")
+                       url=f"{base}/{name}", filename=name + Path(job.artifacts[name]).suffix)
         for name in job.artifacts
         if name in specs
     ]  # fmt: skip
-    return [
-        *items,
-        ArtifactPublic(name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report"),
-    ]
+    report = ArtifactPublic(
+        name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report", filename="report.html"
+    )
+    return [*items, report]
 
 
 @router.get(
