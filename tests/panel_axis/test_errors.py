@@ -138,3 +138,14 @@ def test_edge_on_and_end_on_views_are_degenerate(tmp_path: Path, case: str, seed
     write_view(tmp_path, simulate_view(seed, case=case, width_px=640, height_px=480))  # type: ignore[arg-type]
     err = _refusal(tmp_path / "meta.json")
     assert err.code == "degenerate_view" and err.field == "image"
+
+
+def test_a_shortest_edge_longer_than_any_image_is_an_invalid_option() -> None:
+    # It was accepted, and the job failed with a 300-digit length in its too_few_edges message.
+    from pydantic import ValidationError
+
+    from tumblescan.panel_axis.options import EstimateOptions
+
+    assert EstimateOptions(min_line_px=1_000_000).min_line_px == 1_000_000
+    with pytest.raises(ValidationError, match="min_line_px"):
+        EstimateOptions(min_line_px=1e308)
