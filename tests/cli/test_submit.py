@@ -70,3 +70,10 @@ def test_out_for_a_kind_without_a_cloud_is_refused_before_submitting(
     r = submit("--kind", "bearings", str(f), "--wait", "--out", str(tmp_path / "x.ply"))
     one_error_line(r, "bearings has none; use --artifacts DIR")
     assert service.get("/v1/jobs").json()["items"] == before
+
+
+def test_a_service_url_without_a_scheme_is_one_line(tmp_path: Path) -> None:
+    f = tmp_path / "tracks.json"
+    f.write_text("{}")
+    one_error_line(runner.invoke(app, ["submit", str(f), "--url", "localhost:8000"]), "must start with http://")
+    one_error_line(runner.invoke(app, ["report", "abc", "--url", "localhost:8000"]), "must start with http://")

@@ -36,3 +36,12 @@ def test_the_async_download_cleans_up_the_same_way(tmp_path: Path) -> None:
     with pytest.raises(OSError):
         asyncio.run(go())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report.html"]
+
+
+@pytest.mark.parametrize("url", ["notaurl", "127.0.0.1:8000", "ftp://host"])
+def test_a_service_url_without_http_is_refused_at_once(url: str) -> None:
+    # httpx failed every request with a transport error, which the client retried with backoff.
+    with pytest.raises(ValueError, match="must start with http:// or https://"):
+        Client(url)
+    with pytest.raises(ValueError, match="must start with http:// or https://"):
+        AsyncClient(url)

@@ -177,15 +177,16 @@ def submit(
     timeout: Annotated[float, typer.Option(help="seconds to wait")] = 600.0,
 ) -> None:
     """Submit a job of any kind to a running service; print the job, or with --wait its result."""
-    from tumblescan_client import Client, TumblescanError
+    from tumblescan_client import TumblescanError
 
     try:
         opts = json.loads(options)
     except json.JSONDecodeError as exc:
         raise fail(f"--options is not valid JSON: {exc.msg}") from None
     _check_outputs(wait, timeout, out, artifacts)
+    client = _client(url, api_key)
     try:
-        with Client(url, api_key=api_key) as client:
+        with client:
             spec = client.kinds.get(kind)
             if out is not None and "cloud" not in {a.name for a in spec.artifacts}:
                 raise fail(f"--out writes the rectified cloud, and {kind} has none; use --artifacts DIR")
@@ -232,6 +233,16 @@ def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path
         raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
     if artifacts is not None and artifacts.exists() and not artifacts.is_dir():
         raise fail(f"--artifacts {artifacts}: exists and is not a directory")
+
+
+def _client(url: str | None, api_key: str | None) -> Any:
+    """The client, or one line and exit 2 for a service URL it refuses (no scheme)."""
+    from tumblescan_client import Client
+
+    try:
+        return Client(url, api_key=api_key)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
 
 
 def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
@@ -308,11 +319,14 @@ def report(
     api_key: Annotated[str | None, typer.Option(help="API key (TUMBLESCAN_API_KEY)")] = None,
 ) -> None:
     """Save a finished job's HTML report (self-contained, works offline)."""
-    from tumblescan_client import Client, TumblescanError
+    from tumblescan_client import TumblescanError
 
+    client = _client(url, api_key)
     try:
-        with Client(url, api_key=api_key) as client:
+        with client:
             client.jobs.download_report(job_id, out)
     except TumblescanError as exc:
         raise typer.Exit(_client_error(exc)) from None
+    except OSError as exc:  # --out cannot be written
+        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
     typer.echo(f"wrote {out}")
