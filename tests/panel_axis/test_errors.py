@@ -149,3 +149,27 @@ def test_a_shortest_edge_longer_than_any_image_is_an_invalid_option() -> None:
     assert EstimateOptions(min_line_px=1_000_000).min_line_px == 1_000_000
     with pytest.raises(ValidationError, match="min_line_px"):
         EstimateOptions(min_line_px=1e308)
+
+
+@pytest.mark.parametrize(
+    ("path", "value"),
+    [
+        ("camera.fx_px", 1e308),
+        ("camera.skew", 1e12),
+        ("camera.distortion", [1e300, 0.0, 0.0, 0.0, 0.0]),
+        ("pointing.azimuth_deg", 1e300),
+        ("pointing.roll_deg", -1e300),
+        ("station.height_m", 1e300),
+        ("prior.range_m", 1e300),
+        ("prior.panel_length_m", 1e300),
+        ("prior.panel_width_m", 1e300),
+    ],
+)
+def test_absurdly_large_numbers_are_refused_naming_their_field(path: str, value: object) -> None:
+    # Each was accepted: the job then failed far from the cause (too_few_edges) or "succeeded".
+    meta = _valid_meta()
+    block, key = path.split(".")
+    meta[block][key] = value  # type: ignore[index]
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta))
+    assert exc.value.code == "invalid_input" and exc.value.field is not None and exc.value.field.startswith(path)
