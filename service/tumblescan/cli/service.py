@@ -22,9 +22,37 @@ if TYPE_CHECKING:
 
 
 def _settings(**overrides: Any) -> Settings:
+    """The settings from the flags over the environment; a value they refuse (a port over
+    65535, TUMBLESCAN_WORKERS=abc) is one line and exit 2, naming the setting."""
+    from pydantic import ValidationError
+
     from ..settings import Settings
 
-    return Settings(**{k: v for k, v in overrides.items() if v is not None})
+    try:
+        return Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        e = exc.errors(include_url=False)[0]
+        name = ".".join(str(p) for p in e["loc"])
+        raise fail(f"setting {name} (--{name.replace('_', '-')} or TUMBLESCAN_{name.upper()}): {e['msg']}") from None
+
+
+def _bind_problem(host: str, port: int) -> str | None:
+    """Why ``serve`` could not listen on host:port (in use, not an address here), or None.
+    Checked before anything starts, so the answer is one line rather than uvicorn's log."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError as exc:
+        return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+    family, _, _, _, address = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            return (
+                f"cannot listen on {host}:{port}: {exc.strerror or exc} (--port or TUMBLESCAN_PORT to choose another)"
+            )
+    return None
 
 
 def _logging() -> None:
@@ -63,7 +91,7 @@ def serve(
         raise typer.Exit(2)
     from ..preflight import start_up_problem
 
-    if problem := start_up_problem(s):
+    if problem := start_up_problem(s) or _bind_problem(s.host, s.port):
         raise fail(problem)
     if not (s.api_keys or s.admin_keys):
         typer.echo(
