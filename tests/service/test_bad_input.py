@@ -168,6 +168,7 @@ def test_format_npz_on_an_artifact_that_is_not_a_ply_is_refused(client: TestClie
     assert service.store.succeed(job.id, {}, {"overlay": "overlay.png"})
     d = detail(client.get(f"/v1/jobs/{job.id}/artifacts/overlay", params={"format": "npz"}))
     assert d["field"] == "format" and "PLY" in d["message"]
+    assert detail(client.get(f"/v1/jobs/{job.id}/artifacts/report", params={"format": "npz"}))["field"] == "format"
     assert client.get(f"/v1/jobs/{job.id}/artifacts/overlay").status_code == 200
     # Each artifact says what to save it as: the CLI saved linescan's cloud as cloud.bin.
     listed = {a["name"]: a["filename"] for a in client.get(f"/v1/jobs/{job.id}/artifacts").json()}

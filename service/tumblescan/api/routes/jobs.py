@@ -182,6 +182,8 @@ def get_artifact(
 ) -> FileResponse:
     """One artifact of a succeeded job (``report`` is its HTML report)."""
     if name == "report":
+        if format == "npz":
+            raise MalformedInputError("format=npz applies to PLY artifacts; report is text/html", field="format")
         return get_job_report(job_id, service, caller)
     job = _succeeded(service.get(job_id, caller.scope), job_id, f"its {name} exists")
     spec = next((a for a in get_kind(job.kind).artifacts if a.name == name), None)
