@@ -142,14 +142,20 @@ class Jobs:
             if resp.status_code != 200:
                 resp.read()
                 return resp
-            with open(tmp, "wb") as fh:
-                for chunk in resp.iter_bytes(1 << 20):
-                    fh.write(chunk)
-            resp.close()
+            try:
+                with open(tmp, "wb") as fh:
+                    for chunk in resp.iter_bytes(1 << 20):
+                        fh.write(chunk)
+            finally:
+                resp.close()
             return resp
 
-        self._c._send(send)
-        tmp.replace(out)
+        try:
+            self._c._send(send)
+            tmp.replace(out)
+        except BaseException:  # no half-written .part left beside the target
+            tmp.unlink(missing_ok=True)
+            raise
         return out
 
     def cancel(self, job_id: str, *, timeout: float | None = None) -> Job:
@@ -337,14 +343,20 @@ class AsyncJobs:
             if resp.status_code != 200:
                 await resp.aread()
                 return resp
-            with open(tmp, "wb") as fh:
-                async for chunk in resp.aiter_bytes(1 << 20):
-                    fh.write(chunk)
-            await resp.aclose()
+            try:
+                with open(tmp, "wb") as fh:
+                    async for chunk in resp.aiter_bytes(1 << 20):
+                        fh.write(chunk)
+            finally:
+                await resp.aclose()
             return resp
 
-        await self._c._send(send)
-        tmp.replace(out)
+        try:
+            await self._c._send(send)
+            tmp.replace(out)
+        except BaseException:  # no half-written .part left beside the target
+            tmp.unlink(missing_ok=True)
+            raise
         return out
 
     async def cancel(self, job_id: str, *, timeout: float | None = None) -> Job:

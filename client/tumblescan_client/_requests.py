@@ -26,6 +26,10 @@ def configure(
 ) -> tuple[str, dict[str, str], RetryPolicy]:
     """Base URL, headers and retry policy, from the arguments or the environment."""
     url = base_url or os.environ.get("TUMBLESCAN_URL") or DEFAULT_URL
+    scheme = url.split("://", 1)[0].lower() if "://" in url else ""
+    if scheme not in ("http", "https"):
+        # Refused here, once: httpx would fail every request with a transport error, retried with backoff.
+        raise ValueError(f"service URL {url!r} must start with http:// or https://")
     key = api_key or os.environ.get("TUMBLESCAN_API_KEY")
     headers = {"User-Agent": "tumblescan-client/0.1"}
     if key:

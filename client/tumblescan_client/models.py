@@ -111,3 +111,4 @@ class Artifact(_Model):
     media_type: str
     description: str
     url: str
+    filename: str | None = None  # a name to save it as, with its extension (older services: None)

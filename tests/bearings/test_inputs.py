@@ -131,3 +131,29 @@ def test_mutated_documents_either_run_or_are_refused_never_crash(doc: dict[str, 
         for method in ("ml", "paper"):
             result = estimate(inp, EstimateOptions(method=method))
             json.dumps(result, allow_nan=False)
+
+
+@pytest.mark.parametrize(
+    ("where", "field"),
+    [
+        (lambda d: d, "comment"),
+        (lambda d: d["stations"][0], "stations[0].sigma_az"),
+        (lambda d: d["frames"][1], "frames[1].time"),
+        (lambda d: d["frames"][0]["detections"]["S1"][0], "frames[0].detections.S1[0].sigma_az"),
+    ],
+)
+def test_a_field_the_format_does_not_have_is_refused_by_name(where: Any, field: str) -> None:
+    # A misspelt per-detection "sigma_az" was ignored and the station's sigma used instead.
+    doc = copy.deepcopy(LOCAL)
+    where(doc)[field.rsplit(".", 1)[-1]] = 0.5
+    with pytest.raises(InputError) as err:
+        parse_input(doc)
+    assert err.value.code == "invalid_input" and err.value.field == field and "is not a field" in str(err.value)
+
+
+def test_ecef_geodetic_refuses_unknown_fields_too() -> None:
+    doc = copy.deepcopy(ECEF)
+    doc["stations"][1]["geodetic"]["alt_m"] = 10.0
+    with pytest.raises(InputError) as err:
+        parse_input(doc)
+    assert err.value.field == "stations[1].geodetic.alt_m"

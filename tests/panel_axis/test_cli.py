@@ -64,3 +64,14 @@ def test_simulate_then_broken_meta_exits_2_with_one_line(tmp_path: Path) -> None
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: camera.fx_px")
     assert r.stdout == ""
+
+
+def test_a_truth_file_that_is_not_one_exits_2_before_any_work(tmp_path: Path) -> None:
+    # The truth is read first: a broken meta.json proves the estimate never started.
+    (tmp_path / "meta.json").write_text("{}")
+    for content, words in [("{}", "truth.axis_camera"), ('{"a": NaN', "truth: not valid JSON"), ("[1]", "JSON object")]:
+        (tmp_path / "truth.json").write_text(content)
+        args = ["estimate", str(tmp_path / "meta.json"), "--truth", str(tmp_path / "truth.json")]
+        r = runner.invoke(app, [*args, "--report", str(tmp_path / "r.html")])
+        assert r.exit_code == 2 and r.exception is not None and not isinstance(r.exception, KeyError), r.output
+        assert words in r.output and r.output.count("\n") == 1, r.output

@@ -138,3 +138,38 @@ def test_edge_on_and_end_on_views_are_degenerate(tmp_path: Path, case: str, seed
     write_view(tmp_path, simulate_view(seed, case=case, width_px=640, height_px=480))  # type: ignore[arg-type]
     err = _refusal(tmp_path / "meta.json")
     assert err.code == "degenerate_view" and err.field == "image"
+
+
+def test_a_shortest_edge_longer_than_any_image_is_an_invalid_option() -> None:
+    # It was accepted, and the job failed with a 300-digit length in its too_few_edges message.
+    from pydantic import ValidationError
+
+    from tumblescan.panel_axis.options import EstimateOptions
+
+    assert EstimateOptions(min_line_px=1_000_000).min_line_px == 1_000_000
+    with pytest.raises(ValidationError, match="min_line_px"):
+        EstimateOptions(min_line_px=1e308)
+
+
+@pytest.mark.parametrize(
+    ("path", "value"),
+    [
+        ("camera.fx_px", 1e308),
+        ("camera.skew", 1e12),
+        ("camera.distortion", [1e300, 0.0, 0.0, 0.0, 0.0]),
+        ("pointing.azimuth_deg", 1e300),
+        ("pointing.roll_deg", -1e300),
+        ("station.height_m", 1e300),
+        ("prior.range_m", 1e300),
+        ("prior.panel_length_m", 1e300),
+        ("prior.panel_width_m", 1e300),
+    ],
+)
+def test_absurdly_large_numbers_are_refused_naming_their_field(path: str, value: object) -> None:
+    # Each was accepted: the job then failed far from the cause (too_few_edges) or "succeeded".
+    meta = _valid_meta()
+    block, key = path.split(".")
+    meta[block][key] = value  # type: ignore[index]
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta))
+    assert exc.value.code == "invalid_input" and exc.value.field is not None and exc.value.field.startswith(path)

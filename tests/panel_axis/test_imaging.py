@@ -77,3 +77,35 @@ def test_unreadable_and_refused_images(tmp_path: Path) -> None:
     rgb = np.zeros((70, 70, 3), np.uint8)
     rgb[..., 2] = 100  # red in OpenCV's BGR order
     assert to_gray(rgb)[0, 0] == pytest.approx(29.9)
+
+
+def test_a_truncated_png_is_refused_in_one_line_without_opencvs_warning(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    write_image(tmp_path / "x.png", (np.arange(96 * 96).reshape(96, 96) % 250).astype(np.uint8))
+    data = (tmp_path / "x.png").read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
+    capfd.readouterr()
+    with pytest.raises(UnreadableImageError):
+        read_image(tmp_path / "cut.png")
+    assert capfd.readouterr().err == ""  # OpenCV printed "PNG input buffer is incomplete" on stderr
+
+
+def test_a_png_declaring_too_many_pixels_is_refused_before_decoding(tmp_path: Path) -> None:
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", 100_000, 100_000, 8, 0, 0, 0, 0)  # 10 Gpx, 8-bit gray
+    chunk = struct.pack(">I", len(ihdr)) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+    (tmp_path / "bomb.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk)
+    with pytest.raises(InputError, match=r"declares 10000000000 px, over the 64 Mpx limit"):
+        read_image(tmp_path / "bomb.png")
+
+
+def test_a_tiff_declaring_too_many_pixels_is_refused_before_decoding(tmp_path: Path) -> None:
+    import tifffile
+
+    # 8000 x 8200 zeros, zlib-tiled: about 0.1 MB on disk for 65.6 Mpx (just over the limit).
+    tifffile.imwrite(tmp_path / "big.tif", np.zeros((8000, 8200), np.uint8), compression="zlib", tile=(1024, 1024))
+    with pytest.raises(InputError, match=r"declares 65600000 px, over the 64 Mpx limit"):
+        read_image(tmp_path / "big.tif")

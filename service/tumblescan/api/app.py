@@ -102,6 +102,7 @@ def create_app(settings: Settings | None = None, *, embedded_workers: int = 0) -
         generate_unique_id_function=lambda route: route.name,
     )
     errors.install(app)
+    app.add_middleware(errors.InternalErrors)
     app.add_middleware(BodyLimit, max_bytes=s.max_upload_bytes)
     app.include_router(jobs.router)
     app.include_router(kinds.router)

@@ -36,6 +36,7 @@ class ArtifactPublic(BaseModel):
     media_type: str
     description: str
     url: str
+    filename: str = Field(description="a file name to save it as, with its extension (cloud.ply, report.html)")
 
 
 class JobPublic(BaseModel):

@@ -118,12 +118,30 @@ def _list(value: Any, field: str) -> list[Any]:
     return value
 
 
+TOP_FIELDS = frozenset({"schema", "frame", "units", "epoch_utc", "stations", "frames"})
+STATION_FIELDS = frozenset({"id", "sigma_az_deg", "sigma_el_deg", "position_m", "position_sigma_m", "geodetic"})
+GEODETIC_FIELDS = frozenset({"lat_deg", "lon_deg", "height_m"})
+FRAME_FIELDS = frozenset({"index", "t", "detections"})
+DETECTION_FIELDS = frozenset({"id", "az_deg", "el_deg", "snr", "sigma_az_deg", "sigma_el_deg"})
+
+
+def _known(obj: dict[str, Any], fields: frozenset[str], where: str) -> None:
+    """Refuse a field the format does not have: a misspelt ``sigma_az_deg`` override would
+    otherwise be ignored and the station's σ used in its place, silently."""
+    unknown = sorted(set(obj) - fields)
+    if unknown:
+        name = f"{where}.{unknown[0]}" if where else unknown[0]
+        raise _bad(name, f"is not a field of the input (known: {', '.join(sorted(fields))})")
+
+
 def load_json(data: bytes | str, *, field: str = "input") -> Any:
     """Parse JSON, keeping NaN/Infinity tokens for validation to name."""
     try:
         return json.loads(data, parse_constant=_NonFinite)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidBearingsInputError(f"{field} is not valid JSON ({exc})", field=field) from None
+    except RecursionError:
+        raise InvalidBearingsInputError(f"{field}: the JSON nests too deeply to read", field=field) from None
 
 
 def read_input(path: Path, limits: Limits | None = None) -> BearingsInput:
@@ -139,6 +157,7 @@ def parse_input(doc: Any, limits: Limits | None = None) -> BearingsInput:
     """Validate a parsed input document (see the digest's §6.1) and convert it to arrays."""
     limits = limits or Limits()
     doc = _obj(doc, "input")
+    _known(doc, TOP_FIELDS, "")
     if doc.get("schema") != INPUT_SCHEMA:
         raise _bad("schema", f"= {json.dumps(doc.get('schema'), default=repr)} is not {INPUT_SCHEMA!r}")
     frame = doc.get("frame")
@@ -162,6 +181,7 @@ def _stations(value: Any, frame: JobFrame) -> tuple[Station, Station]:
     for i, raw in enumerate(items):
         f = f"stations[{i}]"
         st = _obj(raw, f)
+        _known(st, STATION_FIELDS, f)
         sid = st.get("id")
         if not isinstance(sid, str) or not sid:
             raise _bad(f"{f}.id", "must be a non-empty string")
@@ -189,6 +209,7 @@ def _stations(value: Any, frame: JobFrame) -> tuple[Station, Station]:
             if "geodetic" not in st:
                 raise _bad(f"{f}.geodetic", "is missing (needed for frame 'ecef')")
             g = _obj(st["geodetic"], f"{f}.geodetic")
+            _known(g, GEODETIC_FIELDS, f"{f}.geodetic")
             for key in ("lat_deg", "lon_deg", "height_m"):
                 if key not in g:
                     raise _bad(f"{f}.geodetic.{key}", "is missing")
@@ -224,6 +245,7 @@ def _frames(value: Any, stations: tuple[Station, Station], limits: Limits) -> li
     for fi, raw in enumerate(items):
         f = f"frames[{fi}]"
         fr = _obj(raw, f)
+        _known(fr, FRAME_FIELDS, f)
         index = fr.get("index")
         if isinstance(index, bool) or not isinstance(index, int):
             raise _bad(f"{f}.index", "must be an integer")
@@ -271,6 +293,7 @@ def _detections(value: Any, f: str, station: Station, ids_seen: set[str], limits
     for j, raw in enumerate(items):
         g = f"{f}[{j}]"
         det = _obj(raw, g)
+        _known(det, DETECTION_FIELDS, g)
         did = det.get("id")
         if not isinstance(did, str) or not did:
             raise _bad(f"{g}.id", "must be a non-empty string")

@@ -10,8 +10,10 @@ from __future__ import annotations
 import typer
 
 from . import bearings, demo, linescan, marker_pose, panel_axis, service, spin_rate
+from .common import OneLineErrors
 
 app = typer.Typer(
+    cls=OneLineErrors,
     add_completion=False,
     no_args_is_help=True,
     help="How space targets move and where they are: line-scan lidar, images, markers, bearings.",

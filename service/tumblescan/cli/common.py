@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import wraps
 from typing import Any, TypeVar
 
 import typer
+from pydantic import ValidationError
+from typer.core import TyperGroup
+
+try:  # typer 0.29 carries its own click; earlier ones use click's
+    from typer._click.exceptions import ClickException, NoArgsIsHelpError, UsageError
+except ImportError:  # pragma: no cover
+    from click.exceptions import ClickException, NoArgsIsHelpError, UsageError  # type: ignore[assignment]
 
 from ..errors import InputError
 
@@ -30,12 +37,57 @@ def input_errors(fn: F) -> F:
             return fn(*args, **kwargs)
         except InputError as exc:
             raise fail(str(exc)) from None
+        except ValidationError as exc:  # options built from flags: a value out of range names its field
+            e = exc.errors(include_url=False)[0]
+            where = ".".join(str(p) for p in e["loc"]) or exc.title
+            raise fail(f"{where}: {e['msg']}") from None
         except FileNotFoundError as exc:
             raise fail(f"no such file: {exc.filename}") from None
-        except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+        except IsADirectoryError as exc:  # a rename names its target second
+            raise fail(f"{exc.filename2 or exc.filename} is a directory, not a file") from None
+        except UnicodeDecodeError as exc:
             raise fail(str(exc)) from None
+        except RecursionError:  # json gives up on input nested near 1000 levels deep
+            raise fail("an input file's JSON nests too deeply to read") from None
+        except OSError as exc:  # permission denied, a read-only or full disk: one line all the same
+            where = exc.filename2 or exc.filename
+            raise fail(f"{where}: {exc.strerror or exc}" if where else str(exc)) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+class OneLineErrors(TyperGroup):
+    """The root command group: a usage error (an unknown option, a value out of range, a
+    missing argument) is ``error: ...`` on one line with exit code 2, like every other bad
+    input, instead of click's usage box of five or more lines."""
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **kwargs: Any,
+    ) -> Any:
+        try:
+            rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **kwargs)
+        except NoArgsIsHelpError as exc:  # a bare group: its help, as before
+            exc.show()
+            rv = exc.exit_code
+        except UsageError as exc:
+            hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx is not None else ""
+            typer.echo(f"error: {exc.format_message()}{hint}", err=True)
+            rv = exc.exit_code
+        except ClickException as exc:
+            typer.echo(f"error: {exc.format_message()}", err=True)
+            rv = exc.exit_code
+        except typer.Abort:
+            typer.echo("aborted", err=True)
+            rv = 1
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else 0)
 
 
 @contextmanager

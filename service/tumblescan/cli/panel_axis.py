@@ -62,6 +62,11 @@ def estimate(
     from ..panel_axis.options import EstimateOptions
     from ..panel_axis.pipeline import load_input, run, write_result
 
+    truth_doc = None
+    if truth is not None:  # read before the estimate, so a bad file is refused before any work
+        from ..panel_axis.report import load_truth
+
+        truth_doc = load_truth(truth.read_bytes())
     with json_stdout(as_json):  # OpenCV or Open3D chatter goes to stderr, not into the JSON
         data = load_input(meta, image)
         result = run(data, EstimateOptions(method=method, require_axis=require_axis, seed=seed))
@@ -71,7 +76,6 @@ def estimate(
         if report is not None:
             from ..panel_axis.report import build_report
 
-            truth_doc = json.loads(truth.read_text()) if truth is not None else None
             report.write_text(build_report(data.gray, data.meta, doc, truth_doc))
     if as_json:
         typer.echo(json.dumps(doc))

@@ -22,9 +22,37 @@ if TYPE_CHECKING:
 
 
 def _settings(**overrides: Any) -> Settings:
+    """The settings from the flags over the environment; a value they refuse (a port over
+    65535, TUMBLESCAN_WORKERS=abc) is one line and exit 2, naming the setting."""
+    from pydantic import ValidationError
+
     from ..settings import Settings
 
-    return Settings(**{k: v for k, v in overrides.items() if v is not None})
+    try:
+        return Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        e = exc.errors(include_url=False)[0]
+        name = ".".join(str(p) for p in e["loc"])
+        raise fail(f"setting {name} (--{name.replace('_', '-')} or TUMBLESCAN_{name.upper()}): {e['msg']}") from None
+
+
+def _bind_problem(host: str, port: int) -> str | None:
+    """Why ``serve`` could not listen on host:port (in use, not an address here), or None.
+    Checked before anything starts, so the answer is one line rather than uvicorn's log."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError as exc:
+        return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+    family, _, _, _, address = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            return (
+                f"cannot listen on {host}:{port}: {exc.strerror or exc} (--port or TUMBLESCAN_PORT to choose another)"
+            )
+    return None
 
 
 def _logging() -> None:
@@ -63,7 +91,7 @@ def serve(
         raise typer.Exit(2)
     from ..preflight import start_up_problem
 
-    if problem := start_up_problem(s):
+    if problem := start_up_problem(s) or _bind_problem(s.host, s.port):
         raise fail(problem)
     if not (s.api_keys or s.admin_keys):
         typer.echo(
@@ -177,15 +205,20 @@ def submit(
     timeout: Annotated[float, typer.Option(help="seconds to wait")] = 600.0,
 ) -> None:
     """Submit a job of any kind to a running service; print the job, or with --wait its result."""
-    from tumblescan_client import Client, TumblescanError
+    from tumblescan_client import TumblescanError
 
     try:
         opts = json.loads(options)
     except json.JSONDecodeError as exc:
         raise fail(f"--options is not valid JSON: {exc.msg}") from None
+    _check_outputs(wait, timeout, out, artifacts)
+    client = _client(url, api_key)
     try:
-        with Client(url, api_key=api_key) as client:
-            parts = _parts(files, client.kinds.get(kind).upload_parts(), {"cloud": cloud, "truth": truth})
+        with client:
+            spec = client.kinds.get(kind)
+            if out is not None and "cloud" not in {a.name for a in spec.artifacts}:
+                raise fail(f"--out writes the rectified cloud, and {kind} has none; use --artifacts DIR")
+            parts = _parts(files, spec.upload_parts(), {"cloud": cloud, "truth": truth})
             job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
@@ -199,7 +232,9 @@ def submit(
                 )
                 raise typer.Exit(1)
             typer.echo(json.dumps(job.result, indent=2))
-            if out is not None and job.artifacts.cloud:
+            if out is not None and not job.artifacts.cloud:
+                raise fail(f"job {job.id} has no rectified cloud (tracks need --cloud); nothing written to {out}")
+            if out is not None:
                 client.jobs.download_cloud(job.id, out)
                 typer.echo(f"wrote {out}", err=True)
             if artifacts is not None:
@@ -209,6 +244,33 @@ def submit(
                     typer.echo(f"wrote {target}", err=True)
     except TumblescanError as exc:
         raise typer.Exit(_client_error(exc)) from None
+    except OSError as exc:  # a download target that cannot be written
+        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+
+
+def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path | None) -> None:
+    """Refuse, before anything is submitted, what could only fail (or be ignored) after the
+    job has run: outputs without --wait, a timeout that cannot be waited, targets that cannot
+    be written."""
+    if timeout <= 0:
+        raise fail(f"--timeout must be more than 0 s (got {timeout:g})")
+    for flag, given in (("--out", out), ("--artifacts", artifacts)):
+        if given is not None and not wait:
+            raise fail(f"{flag} needs --wait (the files exist once the job has succeeded)")
+    if out is not None and (out.is_dir() or not out.parent.is_dir()):
+        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
+    if artifacts is not None and artifacts.exists() and not artifacts.is_dir():
+        raise fail(f"--artifacts {artifacts}: exists and is not a directory")
+
+
+def _client(url: str | None, api_key: str | None) -> Any:
+    """The client, or one line and exit 2 for a service URL it refuses (no scheme)."""
+    from tumblescan_client import Client
+
+    try:
+        return Client(url, api_key=api_key)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
 
 
 def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
@@ -223,12 +285,16 @@ def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> 
             parts.setdefault(name, []).append(given)
     for paths in parts.values():
         for path in paths:
+            if path.is_dir():
+                raise fail(f"{path} is a directory; give its files (PART=FILE, one per file) or a zip")
             if not path.is_file():
                 raise fail(f"no such file: {path}")
     return parts
 
 
 def _artifact_file(artifact: Any) -> str:
+    if getattr(artifact, "filename", None):  # the service names it with the stored file's extension
+        return str(Path(artifact.filename).name)
     suffix = {"text/html": ".html", "application/json": ".json", "image/png": ".png"}.get(artifact.media_type, "")
     return artifact.name + ("" if "." in artifact.name else suffix or ".bin")
 
@@ -281,11 +347,14 @@ def report(
     api_key: Annotated[str | None, typer.Option(help="API key (TUMBLESCAN_API_KEY)")] = None,
 ) -> None:
     """Save a finished job's HTML report (self-contained, works offline)."""
-    from tumblescan_client import Client, TumblescanError
+    from tumblescan_client import TumblescanError
 
+    client = _client(url, api_key)
     try:
-        with Client(url, api_key=api_key) as client:
+        with client:
             client.jobs.download_report(job_id, out)
     except TumblescanError as exc:
         raise typer.Exit(_client_error(exc)) from None
+    except OSError as exc:  # --out cannot be written
+        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
     typer.echo(f"wrote {out}")

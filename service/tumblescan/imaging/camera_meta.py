@@ -4,7 +4,7 @@ side (``width_px`` and ``height_px`` are redeclared there with the bound)."""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -17,12 +17,14 @@ class CameraMeta(BaseModel):
     model: Literal["pinhole"] = "pinhole"
     width_px: int = Field(ge=1)
     height_px: int = Field(ge=1)
-    fx_px: float = Field(gt=0)
-    fy_px: float = Field(gt=0)
+    # Upper bounds only refuse the absurd (1e308 was accepted and the job failed far from the
+    # cause): a 10 m focal length on 0.1 µm pixels is 1e8 px; OpenCV's coefficients stay far under 1e3.
+    fx_px: float = Field(gt=0, le=1e8)
+    fy_px: float = Field(gt=0, le=1e8)
     cx_px: float
     cy_px: float
-    skew: float = 0.0
-    distortion: list[float] | None = None
+    skew: float = Field(0.0, ge=-1e8, le=1e8)
+    distortion: list[Annotated[float, Field(ge=-1e3, le=1e3)]] | None = None
 
     def pinhole(self) -> PinholeCamera:
         dist = tuple(self.distortion) if self.distortion is not None else None

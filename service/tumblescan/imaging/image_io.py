@@ -30,16 +30,54 @@ def write_image(path: Path, image: np.ndarray) -> None:
         raise OSError(f"could not write {path}")
 
 
+def _quiet_cv2() -> None:
+    """OpenCV's decoder logs a warning on stderr for a truncated file (``PNG input buffer is
+    incomplete``) before returning nothing; this module says what is wrong itself, in one
+    line, so OpenCV keeps only its errors."""
+    import cv2
+
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is not None:
+        logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+
+
+TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # classic and BigTIFF, both byte orders
+
+
+def _declared_px(path: Path, data: np.ndarray) -> int | None:
+    """The pixel count the file's header declares (PNG: IHDR, bytes 16-23; TIFF: the first
+    series' shape, read from its tags without decoding), or None when it says none."""
+    if data.size >= 24 and data[:8].tobytes() == b"\x89PNG\r\n\x1a\n":
+        head = data[16:24].tobytes()
+        return int.from_bytes(head[:4], "big") * int.from_bytes(head[4:], "big")
+    if data[:4].tobytes() in TIFF_MAGIC:
+        try:
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                return int(np.prod(tif.series[0].shape[:2], dtype=np.int64)) if tif.series else None
+        except Exception:  # a header tifffile cannot parse: the decoder below refuses the file
+            return None
+    return None
+
+
 def read_image(path: Path, field: str = "image") -> np.ndarray:
     """The image's pixel array as stored (uint8/uint16, (H, W) or (H, W, C)); ``UnreadableImageError``
-    when the file is missing or not an image OpenCV or tifffile can decode."""
+    when the file is missing or not an image OpenCV or tifffile can decode. A PNG or TIFF whose
+    header declares more than ``MAX_PIXELS`` is refused before it is decoded (a compressed file
+    of a few hundred kB can declare gigabytes of pixels)."""
     import cv2
 
     if not path.is_file():
         raise UnreadableImageError(f"{field}: no such file {path}", field=field)
+    _quiet_cv2()
     data = np.fromfile(path, dtype=np.uint8)
+    declared = _declared_px(path, data)
+    if declared is not None and declared > MAX_PIXELS:
+        limit = MAX_PIXELS // 1_000_000
+        raise InputError(f"{field}: {path.name} declares {declared} px, over the {limit} Mpx limit", field=field)
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
-    if img is None and data[:4].tobytes() in (b"II*\x00", b"MM\x00*"):
+    if img is None and data[:4].tobytes() in TIFF_MAGIC:
         try:
             import tifffile
 

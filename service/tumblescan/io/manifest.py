@@ -15,9 +15,11 @@ def manifest_object(data: bytes | str, schema: str, *, field: str = "meta") -> d
     """The parsed object of a manifest whose ``schema`` must be ``schema``."""
     try:
         raw = json.loads(data)
+        bad = first_non_finite(raw)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
-    bad = first_non_finite(raw)
+    except RecursionError:  # Python's parser (or the walk above) gives up near 1000 levels
+        raise InputError(f"{field}: the JSON nests too deeply to read", field=field) from None
     if bad is not None:
         raise InputError(f"{bad}: not a finite number (NaN and Infinity are refused)", field=bad)
     if not isinstance(raw, dict):

@@ -11,6 +11,7 @@ from typing import Any, BinaryIO
 from pydantic import BaseModel, ValidationError
 
 from ..errors import InputError, MalformedInputError
+from .artifacts import safe_name
 from .kind import FinishedJob, InputForm, JobKind, Submission
 from .registry import get_kind
 from .runtime import Runtime
@@ -59,7 +60,7 @@ class JobService:
         job_id = new_id()
         try:
             sub = Submission(form, opts, self.limits(kind), self.artifacts.job_dir(job_id), payload=payload)
-            inputs = kind.accept(sub)
+            inputs = _accept(kind, sub, "input")
         except BaseException:
             self.artifacts.delete(job_id)
             raise
@@ -70,6 +71,7 @@ class JobService:
     ) -> Job:
         kind = get_kind(kind_name)
         _check_fields(kind, files)
+        _check_names(files)
         job_id = new_id()
         try:
             stored = {
@@ -83,7 +85,7 @@ class JobService:
             _check_parts(form, stored)
             opts = self._options(kind, form, options)
             sub = Submission(form, opts, self.limits(kind), self.artifacts.job_dir(job_id), files=stored)
-            inputs = kind.accept(sub)
+            inputs = _accept(kind, sub, form.parts[0].name if len(form.parts) == 1 else "input")
         except BaseException:
             self.artifacts.delete(job_id)
             raise
@@ -197,6 +199,25 @@ def _dump(options: BaseModel) -> dict[str, Any]:
     return options.model_dump(mode="json", exclude_unset=True)
 
 
+def _accept(kind: JobKind, sub: Submission, field: str) -> dict[str, str]:
+    """``kind.accept``, where whatever escapes a kind's reader is still the submitter's 422:
+    accept only reads and checks the input, so an exception it did not mean to raise (JSON
+    nested past Python's recursion limit, an integer too large for an array) is input it
+    could not read. It is logged with its traceback, as the reader's bug it also is. An
+    ``OSError`` stays what it is: the artifact store failing (507)."""
+    try:
+        return kind.accept(sub)
+    except (InputError, OSError):
+        raise
+    except RecursionError:
+        raise MalformedInputError(f"{field}: the JSON nests too deeply to read", field=field) from None
+    except Exception as exc:
+        log.exception("%s: accept raised %s on a submission", kind.name, type(exc).__name__)
+        raise MalformedInputError(
+            f"{field}: the input could not be read ({type(exc).__name__}: {exc})", field=field
+        ) from None
+
+
 def _check_fields(kind: JobKind, files: dict[str, list[Upload]]) -> None:
     """Every upload field is one some form of the kind declares."""
     known = {part.name for form in kind.forms for part in form.parts}
@@ -219,6 +240,18 @@ def _check_parts(form: InputForm, files: dict[str, list[Path]]) -> None:
             raise MalformedInputError(f"{form.name} input needs '{part.name}' ({part.description})", field=part.name)
         if not part.many and len(files.get(part.name, [])) > 1:
             raise MalformedInputError(f"'{part.name}' takes one file; got {len(files[part.name])}", field=part.name)
+
+
+def _check_names(files: dict[str, list[Upload]]) -> None:
+    """Two files of one part under the same (safe) name: a manifest that lists files by name
+    could only ever match one of them, so the other would be silently left out."""
+    for field, items in files.items():
+        seen: set[str] = set()
+        for name, _ in items:
+            safe = safe_name(name)
+            if safe and safe in seen:
+                raise MalformedInputError(f"'{field}' has two files named {safe}", field=field)
+            seen.add(safe)
 
 
 def _explain(error: dict[str, Any], kind: JobKind, form: InputForm) -> dict[str, Any]:

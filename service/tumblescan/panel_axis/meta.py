@@ -34,9 +34,9 @@ class AnglePointing(BaseModel):
     model_config = _STRICT
 
     frame: Literal["station_enu"] = "station_enu"
-    azimuth_deg: float
+    azimuth_deg: float = Field(ge=-360, le=360)
     elevation_deg: float = Field(ge=-90, le=90)
-    roll_deg: float = 0.0
+    roll_deg: float = Field(0.0, ge=-360, le=360)
 
 
 class MatrixPointing(BaseModel):
@@ -51,15 +51,15 @@ class StationMeta(BaseModel):
 
     lat_deg: float = Field(ge=-90, le=90)
     lon_deg: float = Field(ge=-180, le=360)
-    height_m: float = 0.0
+    height_m: float = Field(0.0, ge=-1e4, le=1e6)  # below the deepest trench to above any airborne station
 
 
 class PriorMeta(BaseModel):
     model_config = _STRICT
 
-    range_m: float | None = Field(None, gt=0)
-    panel_length_m: float | None = Field(None, gt=0)
-    panel_width_m: float | None = Field(None, gt=0)
+    range_m: float | None = Field(None, gt=0, le=1e9)  # beyond GEO (3.6e7 m) and the Moon (3.8e8 m)
+    panel_length_m: float | None = Field(None, gt=0, le=1e3)
+    panel_width_m: float | None = Field(None, gt=0, le=1e3)
     wings: int = Field(2, ge=1, le=2)
 
 

@@ -14,7 +14,8 @@ class EstimateOptions(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     method: Literal["ours", "paper"] = "ours"
-    min_line_px: float = Field(30.0, ge=10, description="shortest long edge")
+    # No edge is longer than the longest image accepted: 64 Mpx with sides of 64 px or more.
+    min_line_px: float = Field(30.0, ge=10, le=1_000_000, description="shortest long edge, px")
     weak_snr: float = Field(20.0, gt=0, description="perspective SNR under which the view is weak perspective")
     require_axis: bool = Field(
         False,

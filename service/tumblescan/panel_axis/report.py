@@ -3,11 +3,14 @@ mirror twin when the view is ambiguous), then the numbers with their σ."""
 
 from __future__ import annotations
 
+import json
+import math
 from typing import Any
 
 import numpy as np
 
 from .._typing import FloatArray
+from ..errors import InputError
 from ..imaging.camera import PinholeCamera
 from ..report import image_html, page, table_html
 from .meta import PanelAxisInput
@@ -17,6 +20,28 @@ AXIS_BGR = (40, 40, 230)
 MIRROR_BGR = (230, 160, 40)
 LONG_BGR = (60, 200, 60)
 SHORT_BGR = (200, 120, 220)
+
+
+def load_truth(data: bytes | str, field: str = "truth") -> dict[str, Any]:
+    """A simulation's truth.json as the report uses it: a JSON object whose ``axis_camera`` is
+    3 finite numbers (a unit vector, camera frame); ``InputError`` naming the field otherwise."""
+    try:
+        doc = json.loads(data)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{field}: a JSON object (a simulation's truth.json) is expected", field=field)
+    axis = doc.get("axis_camera")
+    if not (
+        isinstance(axis, list)
+        and len(axis) == 3
+        and all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in axis)
+    ):
+        raise InputError(f"{field}.axis_camera: 3 finite numbers expected (a simulation's truth.json)", field=field)
+    crlb = doc.get("sigma_crlb_deg")
+    if crlb is not None and not (isinstance(crlb, int | float) and not isinstance(crlb, bool)):
+        raise InputError(f"{field}.sigma_crlb_deg: a number or null expected", field=field)
+    return doc
 
 
 def overlay_png(gray: FloatArray, meta: PanelAxisInput, result: dict[str, Any]) -> bytes:

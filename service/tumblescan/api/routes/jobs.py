@@ -85,6 +85,9 @@ async def upload_job(request: Request, response: Response, service: ServiceDep, 
 
 def _parse_upload(form: FormData) -> tuple[str, dict[str, Any], dict[str, list[Upload]]]:
     """The kind, the options and the files by field; text where a file belongs is an error."""
+    for single in ("kind", "options"):
+        if (n := len(form.getlist(single))) > 1:
+            raise MalformedInputError(f"{single} is given {n} times; give it once", field=single)
     kind = form.get("kind", DEFAULT_KIND)
     raw = form.get("options", "{}")
     if not isinstance(kind, str):
@@ -95,6 +98,8 @@ def _parse_upload(form: FormData) -> tuple[str, dict[str, Any], dict[str, list[U
         options = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise MalformedInputError(f"options is not valid JSON: {exc.msg}", field="options") from None
+    except RecursionError:
+        raise MalformedInputError("options nests too deeply to read", field="options") from None
     if not isinstance(options, dict):
         raise MalformedInputError("options must be a JSON object", field="options")
     files: dict[str, list[Upload]] = {}
@@ -153,14 +158,14 @@ def list_artifacts(job_id: str, request: Request, service: ServiceDep, caller: C
     base = f"{base_url(request)}/v1/jobs/{job_id}/artifacts"
     items = [
         ArtifactPublic(name=name, media_type=specs[name].media_type, description=specs[name].description,
-                       url=f"{base}/{name}")
+                       url=f"{base}/{name}", filename=name + Path(job.artifacts[name]).suffix)
         for name in job.artifacts
         if name in specs
     ]  # fmt: skip
-    return [
-        *items,
-        ArtifactPublic(name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report"),
-    ]
+    report = ArtifactPublic(
+        name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report", filename="report.html"
+    )
+    return [*items, report]
 
 
 @router.get(
@@ -177,13 +182,17 @@ def get_artifact(
 ) -> FileResponse:
     """One artifact of a succeeded job (``report`` is its HTML report)."""
     if name == "report":
+        if format == "npz":
+            raise MalformedInputError("format=npz applies to PLY artifacts; report is text/html", field="format")
         return get_job_report(job_id, service, caller)
     job = _succeeded(service.get(job_id, caller.scope), job_id, f"its {name} exists")
     spec = next((a for a in get_kind(job.kind).artifacts if a.name == name), None)
     if spec is None or name not in job.artifacts:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no artifact {name!r}")
     path = service.artifacts.path(job_id, job.artifacts[name])
-    if format == "npz" and path.suffix == ".ply":
+    if format == "npz" and path.suffix != ".ply":
+        raise MalformedInputError(f"format=npz applies to PLY artifacts; {name} is {spec.media_type}", field="format")
+    if format == "npz":
         return _as_npz(path, f"{job_id}-{name}.npz")
     return FileResponse(path, media_type=spec.media_type, filename=f"{job_id}-{path.name}")
 
@@ -204,9 +213,9 @@ def get_job_cloud(
     (``xyz_m``, ``t_s`` and every other field)."""
     job = _succeeded(service.get(job_id, caller.scope), job_id, "the cloud exists")
     if "cloud" not in job.artifacts:
-        raise HTTPException(
-            status.HTTP_404_NOT_FOUND, f"job {job_id} has no cloud (submit one with the tracks to get it rectified)"
-        )
+        linescan = job.kind == DEFAULT_KIND
+        why = "submit one with the tracks to get it rectified" if linescan else f"{job.kind} writes none"
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no cloud ({why})")
     path = service.artifacts.path(job_id, job.artifacts["cloud"])
     if format == "npz":
         return _as_npz(path, f"{job_id}-rectified.npz")

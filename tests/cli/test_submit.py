@@ -1,0 +1,79 @@
+"""``tumblescan submit``: what can only fail after the job has run is refused before it is
+submitted, in one line with exit code 2."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+from typer.testing import CliRunner
+
+import tumblescan_client
+from tumblescan.api.app import create_app
+from tumblescan.cli import app
+from tumblescan.settings import Settings
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    """The API in-process (no workers): enough for what submit checks before a job runs."""
+    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("submit") / "data"))) as c:
+        yield c
+
+
+@pytest.fixture
+def to_service(service: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
+    real = tumblescan_client.Client
+
+    def client(url: str | None = None, **kw: Any) -> tumblescan_client.Client:
+        return real("http://testserver", transport=service._transport, **kw)
+
+    monkeypatch.setattr(tumblescan_client, "Client", client)
+
+
+def submit(*args: str) -> Any:
+    return runner.invoke(app, ["submit", *args, "--url", "http://127.0.0.1:9"])
+
+
+def one_error_line(r: Any, words: str) -> None:
+    assert r.exit_code == 2, r.output
+    assert r.output.count("\n") == 1 and words in r.output, r.output
+
+
+def test_outputs_that_could_only_fail_later_are_refused_first(tmp_path: Path) -> None:
+    # Port 9 has no service: each refusal comes before the client is used.
+    f = tmp_path / "tracks.json"
+    f.write_text("{}")
+    one_error_line(submit(str(f), "--wait", "--timeout", "0"), "--timeout must be more than 0 s")
+    one_error_line(submit(str(f), "--out", str(tmp_path / "x.ply")), "--out needs --wait")
+    one_error_line(submit(str(f), "--artifacts", str(tmp_path / "a")), "--artifacts needs --wait")
+    one_error_line(submit(str(f), "--wait", "--out", str(tmp_path)), "is a directory")
+    one_error_line(submit(str(f), "--wait", "--out", str(tmp_path / "no" / "x.ply")), "no such directory")
+    one_error_line(submit(str(f), "--wait", "--artifacts", str(f)), "exists and is not a directory")
+
+
+def test_a_directory_given_as_a_file_is_named_a_directory(tmp_path: Path, to_service: None) -> None:
+    one_error_line(submit("--kind", "bearings", str(tmp_path)), "is a directory")
+
+
+def test_out_for_a_kind_without_a_cloud_is_refused_before_submitting(
+    tmp_path: Path, to_service: None, service: TestClient
+) -> None:
+    f = tmp_path / "input.json"
+    f.write_text("{}")
+    before = service.get("/v1/jobs").json()["items"]
+    r = submit("--kind", "bearings", str(f), "--wait", "--out", str(tmp_path / "x.ply"))
+    one_error_line(r, "bearings has none; use --artifacts DIR")
+    assert service.get("/v1/jobs").json()["items"] == before
+
+
+def test_a_service_url_without_a_scheme_is_one_line(tmp_path: Path) -> None:
+    f = tmp_path / "tracks.json"
+    f.write_text("{}")
+    one_error_line(runner.invoke(app, ["submit", str(f), "--url", "localhost:8000"]), "must start with http://")
+    one_error_line(runner.invoke(app, ["report", "abc", "--url", "localhost:8000"]), "must start with http://")
