@@ -37,6 +37,9 @@ MIN_SIDE_HITS = 2
 # those out let cells at edges pass for planar, and on the 100 m bench error/sigma rose from
 # 1.04 to 1.16. More than this are spurious returns and are left out.
 SPURIOUS_MIN_SHARE = 0.01
+# A return off its cell's ranges is a surface's (a thin boom in front of a panel) when this
+# many others of its cell and the 8 around lie within 3 range sigmas of it.
+MIN_SUPPORT = 12
 # The 8 cells around a cell, (azimuth, elevation) steps; the 4 that share a side with it.
 NEIGHBOUR_OFFSETS = tuple((da, de) for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de)
 SIDE_NEIGHBOURS = tuple(k for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if da == 0 or de == 0)
@@ -137,7 +140,7 @@ def prepare(
     # occlusion stays off the interior even when its far minority is left out below.
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
-    kept = None if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m)
+    kept = None if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m, neighbours)
     if kept is not None and np.mean(~kept) <= SPURIOUS_MIN_SHARE:
         kept = None
     # Every cell keeps its median return, so the cells (and their order) stay as they are.
@@ -160,15 +163,22 @@ def prepare(
     )
 
 
-def _range_inliers(cell: IntArray, range_m: FloatArray, range_sigma_m: float) -> NDArray[np.bool_]:
+def _range_inliers(
+    cell: IntArray, range_m: FloatArray, range_sigma_m: float, neighbours: IntArray | None = None
+) -> NDArray[np.bool_]:
     """Points whose range lies within their cell's Tukey fences, widened by 3 range sigmas:
-    ``[q1 - 1.5 IQR - 3 s_r, q3 + 1.5 IQR + 3 s_r]``. A surface's own ranges, spread by its
-    slope and by noise, lie inside; a return metres off (multipath, a stray reflection) does
-    not. Cells of fewer than 4 points keep every point."""
+    ``[q1 - 1.5 IQR - 3 s_r, q3 + 1.5 IQR + 3 s_r]``, or that a surface supports: at least
+    ``MIN_SUPPORT`` other returns of their cell and its ``neighbours`` ``(m, 8)`` lie within
+    3 range sigmas of their range. A surface's own ranges, spread by its slope and by noise,
+    lie inside; so does a thin boom or truss in front of a panel, a minority in every cell it
+    crosses but a line of returns at one range; a return metres off (multipath, a stray
+    reflection) does not. Cells of fewer than 4 points keep every point."""
     # Sorted by cell, then range: one key, the cell plus the range scaled into [0, 1) (twice as
     # fast as a two-key lexsort on a million points).
+    lo_m = range_m.min()
     span = float(np.ptp(range_m)) * (1 + 1e-9) + 1e-12
-    order = np.argsort(cell + (range_m - range_m.min()) / span)
+    key = cell + (range_m - lo_m) / span
+    order = np.argsort(key)
     counts = np.bincount(cell)
     starts = np.cumsum(counts) - counts
     sorted_range = range_m[order]
@@ -176,7 +186,24 @@ def _range_inliers(cell: IntArray, range_m: FloatArray, range_sigma_m: float) ->
     q3 = sorted_range[starts + np.ceil(0.75 * (counts - 1)).astype(np.int64)]
     margin = 1.5 * (q3 - q1) + 3 * range_sigma_m
     lo, hi = (q1 - margin)[cell], (q3 + margin)[cell]
-    return np.asarray(((range_m >= lo) & (range_m <= hi)) | (counts[cell] < 4))
+    inside = ((range_m >= lo) & (range_m <= hi)) | (counts[cell] < 4)
+    out = np.flatnonzero(~inside)
+    if neighbours is None or len(out) == 0:
+        return np.asarray(inside)
+    sorted_key = key[order]
+    r, c = range_m[out], cell[out]
+    near = 3 * range_sigma_m
+    lo_f = np.clip((r - near - lo_m) / span, 0.0, 1 - 1e-12)
+    hi_f = np.clip((r + near - lo_m) / span, 0.0, 1 - 1e-12)
+    support = -np.ones(len(out))  # the point itself
+    for nb in np.column_stack([c, neighbours[c]]).T:
+        hit = nb >= 0
+        n = nb[hit]
+        support[hit] += np.searchsorted(sorted_key, n + hi_f[hit], "right") - np.searchsorted(
+            sorted_key, n + lo_f[hit], "left"
+        )
+    inside[out[support >= MIN_SUPPORT]] = True
+    return np.asarray(inside)
 
 
 def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
