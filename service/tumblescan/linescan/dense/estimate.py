@@ -36,6 +36,7 @@ from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validati
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity, validation_frame_count
 from .consensus import INLIER_RAD, pair_misfit, without_precession
+from .degeneracy import degenerate_warnings, imprecision_warning
 from .refine import DenseFit, refine_dense
 from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .search import OverlapCost, swarm_start
@@ -156,6 +157,11 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
             f"frame(s) {', '.join(map(str, unmatched))} had no surface matched in another frame (an edge-on or "
             "featureless view): they constrain nothing and were left out of the fit and the check"
         )
+    if still_poor is None:
+        warnings += degenerate_warnings(data, fit, opts, noise)
+    imprecise = imprecision_warning(fit.x, fit.cov, spin_only=fit.spin_only)
+    if imprecise is not None:
+        warnings.append(imprecise)
     if n2 >= n_frames:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:

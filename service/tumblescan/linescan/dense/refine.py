@@ -21,9 +21,10 @@ Three stages: every surfel matched in a neighbouring frame (right correspondence
 the initializer's rough start), then in random frames (the long time baselines fix the
 rates), then in every other frame from the converged start (each brings its own noise).
 
-Covariance: the sandwich ``H^-1 B H^-1`` with ``H = J^T W J``. A residual carries the noise of
-two surfels, so ``B`` clusters dyadically: ``B = sum_c G_c G_c^T - sum_i g_i g_i^T`` with
-``G_c`` the summed gradient of every residual touching surfel ``c`` as source or target.
+Covariance: the sandwich ``H^-1 B H^-1`` with ``H = J^T W J`` and ``B = sum_c G_c G_c^T``,
+``G_c`` the summed gradient of the residuals whose source surfel lies in patch ``c`` of the
+target at ``T`` (cubes of extent / 10): residuals of one patch, from every frame, share pooled
+normals and the surface model's misfit (see :func:`_sandwich`).
 """
 
 from __future__ import annotations
