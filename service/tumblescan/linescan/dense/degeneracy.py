@@ -79,9 +79,7 @@ def imprecision_warning(x: FloatArray, cov: FloatArray, *, spin_only: bool) -> s
     if not spin_only:
         sigmas["precession axis"] = (np.degrees(axis_sigma_rad(x, cov, 3, 4)), AXIS_LIMIT_DEG, "deg")
         sigmas["precession rate"] = (np.degrees(np.sqrt(max(cov[5, 5], 0.0))), RATE_LIMIT_DEG_S, "deg/s")
-    loose = [
-        f"{name} +-{sd:.2g} {unit}" for name, (sd, limit, unit) in sigmas.items() if IMPRECISE_SIGMAS * sd > limit
-    ]
+    loose = [f"{name} +-{sd:.2g} {unit}" for name, (sd, limit, unit) in sigmas.items() if IMPRECISE_SIGMAS * sd > limit]
     if not loose:
         return None
     return (

@@ -449,7 +449,9 @@ def _patches(anchor_ref: FloatArray, size_m: float) -> IntArray:
     return np.asarray(np.unique(key, axis=0, return_inverse=True)[1].ravel(), dtype=np.int64)
 
 
-def _sandwich(J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, gauge_row: FloatArray | None) -> FloatArray:
+def _sandwich(
+    J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, gauge_row: FloatArray | None
+) -> FloatArray:
     """``H^-1 B H^-1`` with ``H = J^T W J`` and ``B = sum_c G_c G_c^T``, ``G_c`` the summed gradients
     ``g_i = w_i r_i J_i`` of the residuals of cluster ``c``: a patch of the target at ``T``
     (:func:`_patches`), seen in every frame. Residuals of one patch share more than their
