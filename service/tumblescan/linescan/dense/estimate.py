@@ -28,8 +28,6 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
-from ...geometry.rotations import axis_from_angles
-from ...target.motion import canonical_params
 from ..errors import FramesUnusableError, NoSurfacesError
 from ..frames import Frames
 from ..initializer import InitialGuess
@@ -42,7 +40,7 @@ from .degeneracy import degenerate_warnings, imprecision_warning
 from .refine import DenseFit, refine_dense
 from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .search import OverlapCost, swarm_start
-from .starts import Start, consensus_start, registration_start, retimed, vote
+from .starts import Start, consensus_start, registration_start, retimed, same_basin, vote
 from .surfels import DenseData, prepare
 
 # Registration works on a thinned copy of each frame: this many points at most.
@@ -51,9 +49,6 @@ RETIME_PASSES = 2
 SURFEL_FRACTION = 1 / 100
 # A refined motion whose residuals are this many times their model sigma is wrong.
 POOR_SCALE = 3.0
-# A start this close to a fit that failed (axes in deg, rates in deg/s) is not refined again.
-SAME_BASIN_DEG = 3.0
-SAME_BASIN_DEG_S = 1.0
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
@@ -226,7 +221,7 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
         attempt_warnings: list[str] = []
         try:
             start = begin()
-            if best is not None and isinstance(start, Start) and _same_basin(start.guess.x, best.fit.x):
+            if best is not None and isinstance(start, Start) and same_basin(start.guess.x, best.fit.x):
                 # Refined, it would end where the last one did (and fail the same way): 10-40 s
                 # of registration and refinement for nothing.
                 tried.append(f"{path}: starts where the motion above ended, not refined again")
@@ -251,20 +246,6 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
         outcome = "no start was sound" if best.problem() else "the motion comes from " + best.solve.path
         kept.append(f"{len(tried)} start(s) tried before ({'; '.join(tried)}); {outcome}")
     return best, kept, made
-
-
-def _same_basin(x_start: FloatArray, x_fit: FloatArray) -> bool:
-    """Whether a start lies where a fit ended: spin and precession axes within
-    ``SAME_BASIN_DEG`` and rates within ``SAME_BASIN_DEG_S`` (canonical 9-vectors, rates >= 0).
-    Registration starts lie a few degrees from the motion they lead to; distinct minima of the
-    dense fit lie tens of degrees apart."""
-    a, b = canonical_params(np.asarray(x_start, dtype=float)), canonical_params(np.asarray(x_fit, dtype=float))
-    cos_limit = np.cos(np.radians(SAME_BASIN_DEG))
-    axes_close = all(
-        float(axis_from_angles(a[i], a[i + 1]) @ axis_from_angles(b[i], b[i + 1])) > cos_limit for i in (0, 3)
-    )
-    rates_close = bool(np.all(np.abs(a[[2, 5]] - b[[2, 5]]) < np.radians(SAME_BASIN_DEG_S)))
-    return axes_close and rates_close
 
 
 def _judged(setup: _Setup, solve: _Solve, n2: int, warnings: list[str]) -> _Attempt:

@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 from ..sensor import SensorNoise, azimuth_elevation
+from .returns import range_inliers
 
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
 # A surfel is planar when its thinnest axis is this much thinner than the next one and no
@@ -30,14 +31,11 @@ MAX_THICKNESS_SIGMAS = 2.5
 MIN_SURFEL_POINTS = 6
 # Neighbouring cells of one surface differ in range by less than this many surfel sizes.
 MAX_RANGE_STEP = 4.0
-# Far returns (:func:`_range_inliers`) up to this share of the points are taken for the
+# Far returns (:func:`~.returns.range_inliers`) up to this share of the points are taken for the
 # minorities of cells across an occlusion (0.2 % of clean simulated frames) and kept: leaving
 # those out let cells at edges pass for planar, and on the 100 m bench error/sigma rose from
 # 1.04 to 1.16. More than this are spurious returns and are left out.
 SPURIOUS_MIN_SHARE = 0.01
-# A return off its cell's ranges is a surface's (a thin boom in front of a panel) when this
-# many others of its cell and the 8 around lie within 3 range sigmas of it.
-MIN_SUPPORT = 12
 # The 8 cells around a cell, (azimuth, elevation) steps; the 4 that share a side with it.
 NEIGHBOUR_OFFSETS = tuple((da, de) for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de)
 SIDE_NEIGHBOURS = tuple(k for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if da == 0 or de == 0)
@@ -120,7 +118,7 @@ def prepare(
     in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
     surface keeps the points that noise pushed inside, and its centroid is biased off the surface.
     Given the sensor's ``range_sigma_m``, spurious returns (a range far outside the rest of its
-    cell's, :func:`_range_inliers`) are left out when they are more than ``SPURIOUS_MIN_SHARE``
+    cell's, :func:`~.returns.range_inliers`) are left out when they are more than ``SPURIOUS_MIN_SHARE``
     of the points: a few of them make a cell fail every planarity test."""
     az, el = azimuth_elevation(xyz_m)
     range_m = np.linalg.norm(xyz_m, axis=1)
@@ -135,7 +133,7 @@ def prepare(
     # occlusion stays off the interior even when its far minority is left out below.
     rho = np.bincount(cell, range_m) / np.bincount(cell)
     neighbours = _view_neighbours(keys, dims[1])
-    kept = None if range_sigma_m is None else _range_inliers(cell, range_m, range_sigma_m, neighbours)
+    kept = None if range_sigma_m is None else range_inliers(cell, range_m, range_sigma_m, neighbours)
     if kept is not None and np.mean(~kept) <= SPURIOUS_MIN_SHARE:
         kept = None
     # Every cell keeps its median return, so the cells (and their order) stay as they are.
@@ -156,49 +154,6 @@ def prepare(
         neighbours,
         kept,
     )
-
-
-def _range_inliers(
-    cell: IntArray, range_m: FloatArray, range_sigma_m: float, neighbours: IntArray | None = None
-) -> NDArray[np.bool_]:
-    """Points whose range lies within their cell's Tukey fences, widened by 3 range sigmas:
-    ``[q1 - 1.5 IQR - 3 s_r, q3 + 1.5 IQR + 3 s_r]``, or that a surface supports: at least
-    ``MIN_SUPPORT`` other returns of their cell and its ``neighbours`` ``(m, 8)`` lie within
-    3 range sigmas of their range. A surface's own ranges, spread by its slope and by noise,
-    lie inside; so does a thin boom or truss in front of a panel, a minority in every cell it
-    crosses but a line of returns at one range; a return metres off (multipath, a stray
-    reflection) does not. Cells of fewer than 4 points keep every point."""
-    # Sorted by cell, then range: one key, the cell plus the range scaled into [0, 1) (twice as
-    # fast as a two-key lexsort on a million points).
-    lo_m = range_m.min()
-    span = float(np.ptp(range_m)) * (1 + 1e-9) + 1e-12
-    key = cell + (range_m - lo_m) / span
-    order = np.argsort(key)
-    counts = np.bincount(cell)
-    starts = np.cumsum(counts) - counts
-    sorted_range = range_m[order]
-    q1 = sorted_range[starts + np.floor(0.25 * (counts - 1)).astype(np.int64)]
-    q3 = sorted_range[starts + np.ceil(0.75 * (counts - 1)).astype(np.int64)]
-    margin = 1.5 * (q3 - q1) + 3 * range_sigma_m
-    lo, hi = (q1 - margin)[cell], (q3 + margin)[cell]
-    inside = ((range_m >= lo) & (range_m <= hi)) | (counts[cell] < 4)
-    out = np.flatnonzero(~inside)
-    if neighbours is None or len(out) == 0:
-        return np.asarray(inside)
-    sorted_key = key[order]
-    r, c = range_m[out], cell[out]
-    near = 3 * range_sigma_m
-    lo_f = np.clip((r - near - lo_m) / span, 0.0, 1 - 1e-12)
-    hi_f = np.clip((r + near - lo_m) / span, 0.0, 1 - 1e-12)
-    support = -np.ones(len(out))  # the point itself
-    for nb in np.column_stack([c, neighbours[c]]).T:
-        hit = nb >= 0
-        n = nb[hit]
-        support[hit] += np.searchsorted(sorted_key, n + hi_f[hit], "right") - np.searchsorted(
-            sorted_key, n + lo_f[hit], "left"
-        )
-    inside[out[support >= MIN_SUPPORT]] = True
-    return np.asarray(inside)
 
 
 def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
