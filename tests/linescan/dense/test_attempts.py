@@ -70,3 +70,34 @@ def test_when_no_start_is_sound_the_least_flawed_is_kept_and_said(monkeypatch: p
     assert made == ["vote", "consensus", "swarm"] and attempts == 3
     assert best.solve.path == "registration+consensus+dense"  # not poor beats a passed check on a poor fit
     assert "no start was sound" in warnings[-1]
+
+
+def test_a_start_where_the_last_fit_ended_is_not_refined_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The first motion fails the check; the consensus starts 0.6 deg from where it ended and
+    # would end there again, so only the swarm's start (29 deg off) is refined.
+    x = np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
+    begins = {"vote": x, "consensus": x + [0.01, 0, 0, 0, 0.01, 0, 0, 0, 0], "swarm": x + [0.5, 0, 0, 0, 0, 0, 0, 0, 0]}
+
+    def start_of(name: str) -> Any:
+        guess = est.InitialGuess(x=begins[name], x_spin_only=begins[name], cone_collapsed=False, passes=1)
+        return lambda *a: est.Start(guess=guess, inliers=np.ones(3, bool))
+
+    for name, attr in (("vote", "vote"), ("consensus", "consensus_start"), ("swarm", "_swarm")):
+        monkeypatch.setattr(est, attr, start_of(name))
+    refined: list[np.ndarray] = []
+
+    def solve(setup: Any, pairs: Any, start: Any, warnings: list[str], *, path: str) -> Any:
+        refined.append(start.guess.x)
+        fit = type("Fit", (FakeFit,), {"x": start.guess.x})(1.0, np.full(10, 0.02))
+        return est._Solve(fit, start.guess, 10, path)
+
+    def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
+        passed = len(refined) == 2
+        return est._Attempt(solve, solve.fit, Similarity(passed, 1.0, 3.0, "covariance"), warnings)
+
+    monkeypatch.setattr(est, "_solve", solve)
+    monkeypatch.setattr(est, "_judged", judged)
+    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert len(refined) == 2 and np.array_equal(refined[1], begins["swarm"]) and attempts == 3
+    assert best.solve.path == "registration+swarm+dense"
+    assert "not refined again" in warnings[-1]

@@ -333,3 +333,21 @@ def test_pure_spin_from_frames_is_reported_spin_only() -> None:
     assert _angle_deg(r.spin.axis, truth.spin_axis) < 4 * r.uncertainty.spin_axis_deg < 0.5
     assert abs(r.spin.rate_deg_s - 20.0) < 4 * r.uncertainty.spin_rate_deg_s < 0.1
     assert r.validation.passed
+
+
+def test_nearly_parallel_axes_are_reported_as_such() -> None:
+    # Spin and precession 3 deg apart turn the target nearly as one rotation: the frames fix
+    # it, not its split between spin and precession. The result says so, with the spin-only
+    # answer (about the common axis at the summed rate), instead of a confident split.
+    l_s = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
+    across = np.cross(l_s, (1.0, 0.0, 0.0)) / np.linalg.norm(np.cross(l_s, (1.0, 0.0, 0.0)))
+    l_p = np.cos(np.radians(3.0)) * l_s + np.sin(np.radians(3.0)) * across
+    motion = Motion.from_degrees(
+        spin_axis=l_s, spin_rate_deg_s=20.0, precession_axis=l_p, precession_rate_deg_s=8.0, center_m=(0.0, 0.0, 50.0)
+    )
+    sim = simulate_frames(motion, Scene(scanner=SCANNER), seed=4)
+    r = estimate_from_frames(assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line})))
+    said = [w for w in r.warnings if w.startswith("near-degenerate motion") and "unreliable" in w]
+    assert len(said) == 1, r.warnings
+    rate = float(said[0].split(" at ")[1].split(" deg/s")[0])
+    assert abs(rate - 28.0) < 0.5  # the spin-only model turns at about 20 + 8 cos 3 deg/s

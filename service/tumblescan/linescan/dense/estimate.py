@@ -36,10 +36,11 @@ from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validati
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity, validation_frame_count
 from .consensus import INLIER_RAD, pair_misfit, without_precession
+from .degeneracy import degenerate_warnings, imprecision_warning
 from .refine import DenseFit, refine_dense
 from .registration import VOXEL_FRACTION, PairTransforms, extent_m, register_consecutive
 from .search import OverlapCost, swarm_start
-from .starts import Start, consensus_start, registration_start, retimed, vote
+from .starts import Start, consensus_start, registration_start, retimed, same_basin, vote
 from .surfels import DenseData, prepare
 
 # Registration works on a thinned copy of each frame: this many points at most.
@@ -156,6 +157,11 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
             f"frame(s) {', '.join(map(str, unmatched))} had no surface matched in another frame (an edge-on or "
             "featureless view): they constrain nothing and were left out of the fit and the check"
         )
+    if still_poor is None:
+        warnings += degenerate_warnings(data, fit, opts, noise)
+    imprecise = imprecision_warning(fit.x, fit.cov, spin_only=fit.spin_only)
+    if imprecise is not None:
+        warnings.append(imprecise)
     if n2 >= n_frames:
         warnings.append(f"only {n_frames} frames: the two-frame-count check needs more")
     if check is not None and not check.passed:
@@ -214,7 +220,13 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
             setup.progress("initializing", 0.05)
         attempt_warnings: list[str] = []
         try:
-            solve = _solve(setup, global_pairs, begin(), attempt_warnings, path=path)
+            start = begin()
+            if best is not None and isinstance(start, Start) and same_basin(start.guess.x, best.fit.x):
+                # Refined, it would end where the last one did (and fail the same way): 10-40 s
+                # of registration and refinement for nothing.
+                tried.append(f"{path}: starts where the motion above ended, not refined again")
+                continue
+            solve = _solve(setup, global_pairs, start, attempt_warnings, path=path)
         except NoSurfacesError:
             raise
         except FramesUnusableError as exc:

@@ -10,12 +10,16 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from ..._typing import FloatArray
-from ...geometry.rotations import rotate
-from ...target.motion import rotation_matrices
+from ...geometry.rotations import axis_from_angles, rotate
+from ...target.motion import canonical_params, rotation_matrices
 from ..errors import FramesUnusableError
 from ..initializer import InitialGuess, InitializerError, center_from_transforms, motion_from_transforms
 from .consensus import cone_consensus
 from .registration import PairTransforms, consistent_pairs
+
+# A start this close to a fit that failed (axes in deg, rates in deg/s) is not refined again.
+SAME_BASIN_DEG = 3.0
+SAME_BASIN_DEG_S = 1.0
 
 
 def retimed(
@@ -101,3 +105,17 @@ def consensus_start(pairs: PairTransforms, mid: FloatArray, seed: int) -> Start:
             "overlap, and is the target rotating less than ~90 degrees per frame?)",
             field="file",
         ) from None
+
+
+def same_basin(x_start: FloatArray, x_fit: FloatArray) -> bool:
+    """Whether a start lies where a fit ended: spin and precession axes within
+    ``SAME_BASIN_DEG`` and rates within ``SAME_BASIN_DEG_S`` (canonical 9-vectors, rates >= 0).
+    Registration starts lie a few degrees from the motion they lead to; distinct minima of the
+    dense fit lie tens of degrees apart."""
+    a, b = canonical_params(np.asarray(x_start, dtype=float)), canonical_params(np.asarray(x_fit, dtype=float))
+    cos_limit = np.cos(np.radians(SAME_BASIN_DEG))
+    axes_close = all(
+        float(axis_from_angles(a[i], a[i + 1]) @ axis_from_angles(b[i], b[i + 1])) > cos_limit for i in (0, 3)
+    )
+    rates_close = bool(np.all(np.abs(a[[2, 5]] - b[[2, 5]]) < np.radians(SAME_BASIN_DEG_S)))
+    return axes_close and rates_close
