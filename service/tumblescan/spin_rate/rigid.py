@@ -237,14 +237,14 @@ def fit_rigid(
     if omega < 0:  # the same motion: spin vector ω·a
         omega, a = -omega, -a
     return RigidFit(
-        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=_cauchy_cost(r, scale), residuals_px=r,
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
         weights=w, sigma_omega_rad_s=float(np.sqrt(max(cov[0, 0], 0.0))),
         cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
         rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success),
     )  # fmt: skip
 
 
-def _cauchy_cost(r: FloatArray, scale: float) -> float:
+def cauchy_cost(r: FloatArray, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
