@@ -106,7 +106,7 @@ def estimate_spin(
     clock["scan"] = time.perf_counter()
     # 6. Short rigid fits from each start (and their twins, and the leader at simple multiples of
     # its rate), the best carried on; re-match every frame's segments to its lines and refit.
-    fit = best_of_starts(obs, starts, t[0], w_lo, w_hi, radius=radius)
+    fit = best_of_starts(obs, starts, t[0], w_lo, w_hi, c0, radius)
     obs, fit = reject_outliers(obs, fit, t[0])
     progress("fit", 0.85)
     ideal = [np.array([seq.meta.pinhole.undistort(e) for e in segs.ends_px]) for segs in feats.segments]

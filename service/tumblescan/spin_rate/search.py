@@ -22,6 +22,9 @@ PLANE_AXIS_STEP_DEG = 6.0
 PLANE_TILTS_DEG = (-8.0, 0.0, 8.0)
 RATE_FACTORS = (0.5, 2.0 / 3.0, 1.5, 2.0)
 SHORT_NFEV = 25
+# A fit whose lines lie mostly farther from the centre than the target's size is implausible: a
+# slow rate with the lines far away mimics the image motion of a fast one near the centre.
+MAX_LINE_DISTANCE_RADII = 2.0
 Start = tuple[float, FloatArray, FloatArray]
 
 
@@ -64,14 +67,10 @@ def scan_starts(
     axes = axes[sense_hint * axes[:, 2] > -0.15] if sense_hint else np.vstack([axes, plane_axes()])
     C = scan_cost(sub, omegas, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
     progress("scan", 0.7)
-    per_omega = C.min(axis=1)
-    picks: list[tuple[int, int]] = []
-    for k in np.argsort(per_omega):
-        if all(abs(k - s) > 2 for s, _ in picks):
-            picks.append((int(k), int(np.argmin(C[k]))))
-        if len(picks) == 3:
-            break
-    cands = [(float(omegas[k]), axes[a]) for k, a in picks]
+    cands = [(float(omegas[k]), axes[a]) for k, a in _basins(C, 3)]
+    if not sense_hint:  # the best basins among the image-plane axes alone, which the sphere's outshine
+        n_plane = len(plane_axes())
+        cands += [(float(omegas[k]), axes[len(axes) - n_plane + a]) for k, a in _basins(C[:, -n_plane:], 2)]
     for w in coarse:
         k = int(np.argmin(np.abs(omegas - w)))
         cands.append((w, axes[int(np.argmin(C[k]))]))
@@ -93,19 +92,52 @@ def scan_starts(
         c = np.array([c0[0] + r.x[4], c0[1] + r.x[5], 1.0])
         polished.append((float(r.fun), float(r.x[0]), a, c))
     polished.sort(key=lambda p: p[0])
-    return [(w, a, c) for _, w, a, c in polished[: 3 + (0 if sense_hint else 1)]]
+    return [(w, a, c) for _, w, a, c in polished[: 3 + (0 if sense_hint else 2)]]
 
 
-def common_costs(fits: list[RigidFit]) -> FloatArray:
+def _basins(C: FloatArray, n: int) -> list[tuple[int, int]]:
+    """The ``n`` best (rate index, axis index) of a scan (rates, axes), rates over 2 steps apart."""
+    picks: list[tuple[int, int]] = []
+    for k in np.argsort(C.min(axis=1)):
+        if all(abs(k - s) > 2 for s, _ in picks):
+            picks.append((int(k), int(np.argmin(C[k]))))
+        if len(picks) == n:
+            break
+    return picks
+
+
+def common_costs(fits: list[RigidFit], radius: float | None = None, centre: FloatArray | None = None) -> FloatArray:
     """Each fit's Cauchy cost at one scale, the smallest of the fits' own (2 × 1.4826 × MAD, at least
-    0.05 px): fits of the same observations compared alike."""
+    0.05 px): fits of the same observations compared alike. With ``radius`` (the target's radius in
+    units of the range) and ``centre`` (its centre guess, depth 1), fits whose axis misses the
+    target or whose median line lies over ``MAX_LINE_DISTANCE_RADII`` radii from the axis cost
+    infinity, unless all do."""
     scale = min(max(2.0 * 1.4826 * float(np.median(np.abs(f.residuals_px))), 0.05) for f in fits)
-    return np.array([cauchy_cost(f.residuals_px, scale) for f in fits])
+    cost = np.array([cauchy_cost(f.residuals_px, scale) for f in fits])
+    if radius is not None and centre is not None:
+        far = np.zeros(len(fits), dtype=bool)
+        for k, f in enumerate(fits):
+            miss, to_lines = centre_distance(f, centre)
+            far[k] = max(miss, float(np.median(to_lines))) > MAX_LINE_DISTANCE_RADII * radius
+        if not far.all():
+            cost[far] = np.inf
+    return cost
+
+
+def centre_distance(fit: RigidFit, centre: FloatArray) -> tuple[float, FloatArray]:
+    """How far the fit puts the body from the target seen in the images, in units of the range:
+    the distance from ``centre`` (3,) (the target's centre guess, depth 1) to the axis line, and
+    each line's distance (T,) from the axis point ``q`` nearest ``centre``. Both ignore where the
+    centre sits along the axis (a gauge of the model)."""
+    a = fit.axis
+    q = fit.c0 + ((centre - fit.c0) @ a) * a
+    to_lines = np.linalg.norm(np.cross(fit.c0 + fit.lines_p - q, fit.lines_d), axis=1)
+    return float(np.linalg.norm(centre - q)), np.asarray(to_lines, dtype=float)
 
 
 def best_of_starts(
-    obs: Observations, starts: list[Start], t_ref: float, w_lo: float, w_hi: float, sub: Observations | None = None,
-    radius: float = 0.1,
+    obs: Observations, starts: list[Start], t_ref: float, w_lo: float, w_hi: float, centre: FloatArray,
+    radius: float,
 ) -> RigidFit:  # fmt: skip
     """Short fits from every start and from each one's weak-perspective twin; then from the leader
     at ``RATE_FACTORS`` times its rate (inside ``[w_lo, w_hi]``), each with the best axis of the
@@ -114,8 +146,8 @@ def best_of_starts(
     trials += [
         fit_rigid(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref, max_nfev=SHORT_NFEV, passes=1) for f in trials
     ]
-    lead = trials[int(np.argmin(common_costs(trials)))]
-    scan_obs = sub if sub is not None else scan_subset(obs)
+    lead = trials[int(np.argmin(common_costs(trials, radius, centre)))]
+    scan_obs = scan_subset(obs)
     axes = fibonacci_sphere(SCAN_AXES)
     for factor in RATE_FACTORS:
         w = factor * lead.omega_rad_s
@@ -124,5 +156,5 @@ def best_of_starts(
         C = scan_cost(scan_obs, np.array([w]), axes, lead.c0, t_ref, radius, clip_px=SCAN_CLIP_PX)[0]
         for a0 in (lead.axis, axes[int(np.argmin(C))]):
             trials.append(fit_rigid(obs, w, a0, lead.c0, t_ref, max_nfev=SHORT_NFEV, passes=1))
-    best = trials[int(np.argmin(common_costs(trials)))]
+    best = trials[int(np.argmin(common_costs(trials, radius, centre)))]
     return fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t_ref)
