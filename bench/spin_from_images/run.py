@@ -164,7 +164,7 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=512)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--static", type=int, default=5)
-    ap.add_argument("--workers", type=int, default=2, help="rendering processes")
+    ap.add_argument("--workers", type=int, default=2, help="rendering and estimating processes")
     ap.add_argument("--geometries", nargs="*", default=list(GEOMETRIES))
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
@@ -174,23 +174,30 @@ def main() -> None:
     jobs += [("static", args.first_seed + k, args.width, cache) for k in range(args.static)]
     with ProcessPoolExecutor(args.workers) as pool:
         list(pool.map(render, jobs))
+    runs = [
+        (cache / f"{g}_{seed}_{noise}", method)
+        for g, seed, _, _ in jobs
+        for noise in ("clean", "noisy")
+        for method in (("ours", "paper") if g != "static" else ("ours",))
+    ]
     rows = []
-    for g, seed, _, _ in jobs:
-        for noise in ("clean", "noisy"):
-            d = cache / f"{g}_{seed}_{noise}"
-            for method in ("ours", "paper") if g != "static" else ("ours",):
-                rows.append(evaluate(d, method))
-                r = rows[-1]
-                print(
-                    r["case"],
-                    method,
-                    r.get("rate"),
-                    r.get("err_pct"),
-                    r.get("error"),
-                    round(r["seconds"], 2),
-                    flush=True,
-                )
+    with ProcessPoolExecutor(args.workers) as pool:  # one sequence per process (times are per process)
+        for r in pool.map(_evaluate, runs):
+            rows.append(r)
+            print(
+                r["case"],
+                r["method"],
+                r.get("rate"),
+                r.get("err_pct"),
+                r.get("error"),
+                round(r["seconds"], 2),
+                flush=True,
+            )
     print(report(rows))
+
+
+def _evaluate(run: tuple[Path, str]) -> dict[str, Any]:
+    return evaluate(*run)
 
 
 if __name__ == "__main__":

@@ -49,7 +49,7 @@ def reject_outliers(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Obs
         if keep.all() or len(np.unique(obs.track[keep])) < 2:
             break
         obs = subset(obs, keep)
-        fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref)
+        fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
     return obs, fit
 
 

@@ -18,7 +18,7 @@ from .options import EstimateOptions
 from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackObs
 from .rigid import Observations, RigidFit, fit_rigid
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
-from .search import best_of_starts, scan_starts
+from .search import best_of_starts, scan_starts, with_drift_if_needed
 
 MIN_TRACK_FRAMES = 3
 LONG_TRACK_FRAMES = 6
@@ -108,13 +108,14 @@ def estimate_spin(
     # its rate), the best carried on; re-match every frame's segments to its lines and refit.
     fit = best_of_starts(obs, starts, t[0], w_lo, w_hi, c0, radius)
     obs, fit = reject_outliers(obs, fit, t[0])
+    fit = with_drift_if_needed(obs, fit, t[0])
     progress("fit", 0.85)
     ideal = [np.array([seq.meta.pinhole.undistort(e) for e in segs.ends_px]) for segs in feats.segments]
     for _ in range(REMATCH_ROUNDS):  # a better model matches more segments, until it stops growing
         obs2 = rematch(ideal, t, fit, obs, seq.meta.pinhole.K)
         if obs2 is None or len(obs2.track) < 0.8 * len(obs.track):
             break
-        fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0])
+        fit = fit_rigid(obs2, fit.omega_rad_s, fit.axis, fit.c0, t[0], drift=fit.drift)
         obs, fit = reject_outliers(obs2, fit, t[0])
     # The rule of the contract, on the final tracks: at least 2 spanning 6 or more frames.
     frame_of = _frame_of(seq, obs)
@@ -128,7 +129,7 @@ def estimate_spin(
     if not np.isfinite(fit.sigma_omega_rad_s) or not np.isfinite(fit.omega_rad_s):
         raise NotConvergedError("frames: the rigid fit did not converge (sigma not finite)", field="frames")
     # 7. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
-    twin = fit_rigid(obs, fit.omega_rad_s, mirror_twin(fit.axis), fit.c0, t[0])
+    twin = fit_rigid(obs, fit.omega_rad_s, mirror_twin(fit.axis), fit.c0, t[0], drift=fit.drift)
     s2 = max(fit.rms_px**2, 1e-6)
     if twin.cost < fit.cost:
         fit, twin = twin, fit
