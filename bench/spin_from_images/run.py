@@ -170,7 +170,8 @@ def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     cache = OUT / f"spin_cache_{args.width}"
     cache.mkdir(exist_ok=True)
-    jobs = [(g, args.first_seed + k, args.width, cache) for g in args.geometries for k in range(args.n)]
+    # Seed-major order: a run cut short still holds every geometry.
+    jobs = [(g, args.first_seed + k, args.width, cache) for k in range(args.n) for g in args.geometries]
     jobs += [("static", args.first_seed + k, args.width, cache) for k in range(args.static)]
     with ProcessPoolExecutor(args.workers) as pool:
         list(pool.map(render, jobs))
@@ -180,10 +181,13 @@ def main() -> None:
         for noise in ("clean", "noisy")
         for method in (("ours", "paper") if g != "static" else ("ours",))
     ]
-    rows = []
+    rows: list[dict[str, Any]] = []
+    (OUT / "spin_from_images.rows.jsonl").unlink(missing_ok=True)
     with ProcessPoolExecutor(args.workers) as pool:  # one sequence per process (times are per process)
         for r in pool.map(_evaluate, runs):
             rows.append(r)
+            with (OUT / "spin_from_images.rows.jsonl").open("a") as fh:  # partial results survive a cut
+                fh.write(json.dumps(r, default=str) + "\n")
             print(
                 r["case"],
                 r["method"],
