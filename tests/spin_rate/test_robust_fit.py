@@ -10,7 +10,7 @@ import pytest
 from tumblescan.spin_rate.association import reject_outliers
 from tumblescan.spin_rate.rigid import Observations, fit_rigid
 from tumblescan.spin_rate.rotation import rot, unit_from_angles
-from tumblescan.spin_rate.search import best_of_starts, scan_starts
+from tumblescan.spin_rate.search import best_of_starts, scan_starts, with_drift_if_needed
 from tumblescan.spin_rate.tracking import reject_jumps
 
 F_PX = 1100.0
@@ -30,11 +30,13 @@ def _box_edges(half: np.ndarray, centre: np.ndarray) -> list[tuple[np.ndarray, n
 
 
 def synthetic_tracks(
-    seed: int, axis: np.ndarray, rate_deg_s: float, noise_px: float = 0.08, frames: int = 12, step_deg: float = 18.0
-) -> tuple[Observations, dict[str, object]]:
+    seed: int, axis: np.ndarray, rate_deg_s: float, noise_px: float = 0.08, frames: int = 12, step_deg: float = 18.0,
+    drift_px_per_frame: float = 0.0,
+) -> tuple[Observations, dict[str, object]]:  # fmt: skip
     """Line observations of a box bus with a wing spinning about ``axis`` (camera frame): every
     edge whose middle faces the camera (its box's centre farther than the edge) in each frame,
-    end points with ``noise_px`` of perpendicular noise. Returns the observations and the truth."""
+    end points with ``noise_px`` of perpendicular noise; the centre drifts across the image by
+    ``drift_px_per_frame``. Returns the observations and the truth."""
     rng = np.random.default_rng(seed)
     edges = _box_edges(np.array([0.8, 0.7, 1.0]), np.zeros(3))
     edges += _box_edges(np.array([0.02, 2.0, 0.8]), np.array([0.0, 2.9, 0.0]))
@@ -42,12 +44,14 @@ def synthetic_tracks(
     c = np.array([rng.uniform(-2, 2), rng.uniform(-2, 2), RANGE_M])
     w = np.radians(rate_deg_s)
     t = np.cumsum(np.r_[0.0, np.radians(step_deg) / w * rng.uniform(0.97, 1.03, frames - 1)])
+    v = np.array([0.6, 0.8, 0.0]) * drift_px_per_frame * RANGE_M / F_PX / (np.radians(step_deg) / w)
     trk, tt, ends = [], [], []
     for tk in t:
         R = rot(axis, w * tk)[0] @ R0
+        ct = c + v * tk
         for j, (p, q) in enumerate(edges):
-            P, Q = c + R @ p, c + R @ q
-            if (P + Q)[2] / 2 > c[2] + 0.3 or rng.uniform() < 0.3:  # far side, or missed
+            P, Q = ct + R @ p, ct + R @ q
+            if (P + Q)[2] / 2 > ct[2] + 0.3 or rng.uniform() < 0.3:  # far side, or missed
                 continue
             uv = np.array([K @ P, K @ Q])
             uv = uv[:, :2] / uv[:, 2:]
@@ -118,3 +122,14 @@ def test_an_axis_in_the_image_plane_is_found_by_the_scan() -> None:
     starts = scan_starts(obs, omegas, c0, 0.08, float(t[0]), [], 0, lambda *_: None)
     fit = best_of_starts(obs, starts, float(t[0]), omegas[0], omegas[-1], c0, 0.08)
     assert abs(fit.omega_rad_s - truth["rate"]) / truth["rate"] < 0.01, np.degrees(fit.omega_rad_s)  # type: ignore[operator]
+
+
+def test_a_drifting_centre_is_fitted_with_a_velocity_and_a_still_one_without() -> None:
+    axis = unit_from_angles(np.radians(35.0), np.radians(120.0))
+    for drift_px, expect in ((1.2, True), (0.0, False)):
+        obs, truth = synthetic_tracks(4, axis, 28.0, drift_px_per_frame=drift_px)
+        t0 = float(truth["t"][0])  # type: ignore[index]
+        still = fit_rigid(obs, truth["rate"], axis, truth["c0"], t0)  # type: ignore[arg-type]
+        fit = with_drift_if_needed(obs, still, t0)
+        assert fit.drift == expect
+        assert abs(fit.omega_rad_s - truth["rate"]) / truth["rate"] < 0.002, np.degrees(fit.omega_rad_s)  # type: ignore[operator]

@@ -165,9 +165,9 @@ def best_of_starts(
 
 def with_drift_if_needed(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
     """``fit`` refitted with a centre velocity in the image plane when that lowers
-    ``χ² = 2·cost/σ²`` (common Cauchy scale, σ the robust residual scale) by over
+    ``χ² = 2·cost/σ²`` (common Cauchy scale, σ the moving fit's robust residual scale) by over
     ``DRIFT_DELTA_CHI2``; else ``fit``."""
     moving = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=True)
     cost = common_costs([fit, moving])
-    s2 = max(1.4826 * float(np.median(np.abs(fit.residuals_px))), 0.01) ** 2
+    s2 = max(1.4826 * float(np.median(np.abs(moving.residuals_px))), 0.01) ** 2  # the larger model's, as in an F test
     return moving if 2.0 * (cost[0] - cost[1]) / s2 > DRIFT_DELTA_CHI2 else fit
