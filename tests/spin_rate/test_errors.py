@@ -110,7 +110,10 @@ def test_a_fit_without_finite_sigma_is_not_converged(los_seq: Path, monkeypatch:
 
         return dataclasses.replace(real(*a, **k), sigma_omega_rad_s=float("nan"))  # type: ignore[arg-type]
 
-    monkeypatch.setattr(estimate_mod, "fit_rigid", nan_sigma)
+    from tumblescan.spin_rate import association, search
+
+    for mod in (estimate_mod, association, search):  # every module that fits
+        monkeypatch.setattr(mod, "fit_rigid", nan_sigma)
     with pytest.raises(NotConvergedError) as exc:
         run(load_input(los_seq / "meta.json"))
     assert exc.value.code == "not_converged"

@@ -59,9 +59,12 @@ class RigidFit:
     residuals_px: FloatArray
     weights: FloatArray
     sigma_omega_rad_s: float
+    sigma_omega_formal_rad_s: float
+    sigma_omega_jackknife_rad_s: float
     cov_axis_rad2: FloatArray
     rms_px: float
     success: bool
+    drift: bool = False
 
 
 def fibonacci_sphere(n: int) -> FloatArray:
@@ -233,18 +236,57 @@ def fit_rigid(
     G = obs.n_tracks
     cov_cluster = H_inv @ (g.T @ g) @ H_inv * G / max(G - 1, 1)
     cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov)[:, None], cov_cluster, cov)
+    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, obs.track, model.n_global)
     omega, a, c, v, p, d = model.unpack(x0)
     if omega < 0:  # the same motion: spin vector ω·a
         omega, a = -omega, -a
     return RigidFit(
-        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=_cauchy_cost(r, scale), residuals_px=r,
-        weights=w, sigma_omega_rad_s=float(np.sqrt(max(cov[0, 0], 0.0))),
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
+        weights=w, sigma_omega_rad_s=max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk),
+        sigma_omega_formal_rad_s=float(np.sqrt(max(H_inv[0, 0] * s2, 0.0))), sigma_omega_jackknife_rad_s=sigma_jk,
         cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
-        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success),
+        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
     )  # fmt: skip
 
 
-def _cauchy_cost(r: FloatArray, scale: float) -> float:
+def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_global: int) -> float:
+    """The delete-one-track jackknife σ of ω (rad/s), each deletion by one Gauss-Newton step.
+
+    Each track j's 4 line parameters are eliminated (Schur complement), leaving its contribution
+    ``S_j = A_j - B_j C_j⁺ B_jᵀ`` to the global normal matrix and ``s_j = q_g - B_j C_j⁺ q_l`` to the
+    global score (``q = J_jᵀ r_j``, weighted). At the optimum ``Σ s_j = 0``, so without track j the
+    global parameters move by ``Δ_j = (S - S_j)⁺ s_j``, ``S = Σ S_j``, and
+    ``σ² = (G-1)/G · Σ_j (Δ_j,ω - mean Δ_ω)²``. Unlike the sandwich ``S⁻¹ (Σ s_j s_jᵀ) S⁻¹`` it
+    weighs a track by what the others lose without it: a few tracks that hold the rate (short
+    arcs, few long edges) widen σ as they should.
+
+    Parameters
+    ----------
+    JW : (2·O, P) weighted Jacobian (global parameters first, then 4 per track, in track order).
+    rw : (2·O,) weighted residuals (px); track : (O,) track of each observation.
+    n_global : number of global parameters (ω first).
+    """
+    G = int(track.max()) + 1
+    if G < 3:
+        return float("inf")
+    rows = np.repeat(track, 2)
+    S_parts, s_parts = [], []
+    for j in range(G):
+        sel = rows == j
+        Jg = JW[sel, :n_global]
+        Jl = JW[sel, n_global + 4 * j : n_global + 4 * j + 4]
+        C_inv = np.linalg.pinv(Jl.T @ Jl, rcond=1e-12, hermitian=True)
+        B = Jg.T @ Jl
+        S_parts.append(Jg.T @ Jg - B @ C_inv @ B.T)
+        s_parts.append(Jg.T @ rw[sel] - B @ C_inv @ (Jl.T @ rw[sel]))
+    S = np.sum(S_parts, axis=0)
+    delta = np.array(
+        [np.linalg.pinv(S - Sj, rcond=1e-10, hermitian=True)[0] @ sj for Sj, sj in zip(S_parts, s_parts, strict=True)]
+    )
+    return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
+
+
+def cauchy_cost(r: FloatArray, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 

@@ -16,6 +16,10 @@ ANGLE_GRID_DEG = np.arange(-60.0, 60.01, 2.0)
 MAX_ANGLE_DEG = 8.0
 MAX_OFFSET_PX = 5.0
 MIN_SIMILARITY = 0.05
+# A match whose perpendicular offset from its prediction is far above the pair's typical offset is
+# a jump to a neighbouring (parallel) edge, not the same edge: the track is cut there.
+JUMP_MIN_PX = 1.5
+JUMP_FACTOR = 4.0
 
 
 @dataclass
@@ -110,12 +114,25 @@ def match(prev: FloatArray, nxt: FloatArray, affine: FloatArray) -> list[tuple[i
         s_ang = 1 - ang[i, ok] / MAX_ANGLE_DEG
         s_off = np.exp(-0.5 * (off / (MAX_OFFSET_PX / 2)) ** 2) * (off < MAX_OFFSET_PX)
         sim[i, ok] = np.sqrt(s_len) * s_ang * s_off * np.clip(overlap, 0, 1)
-    pairs = []
+    pairs, offsets = [], []
     for i in range(len(p)):
         j = int(np.argmax(sim[i]))
         if sim[i, j] > MIN_SIMILARITY and int(np.argmax(sim[:, j])) == i:
             pairs.append((i, j))
-    return pairs
+            n_i = np.array([-tp[i, 1], tp[i, 0]])
+            offsets.append(float(np.abs((nxt[j] - p[i, 0]) @ n_i).mean()))
+    return reject_jumps(pairs, np.array(offsets))
+
+
+def reject_jumps(pairs: list[tuple[int, int]], offsets_px: FloatArray) -> list[tuple[int, int]]:
+    """The pairs whose perpendicular offset (px, after the affine prediction) is under
+    ``max(JUMP_MIN_PX, JUMP_FACTOR × median offset)``: the affine predicts the edges of one frame
+    pair alike, so an edge far off its prediction has jumped to a neighbouring edge (the right one
+    was missed) and its track is cut there rather than bent."""
+    if len(pairs) < 3:
+        return pairs
+    limit = max(JUMP_MIN_PX, JUMP_FACTOR * float(np.median(offsets_px)))
+    return [pr for pr, off in zip(pairs, offsets_px, strict=True) if off <= limit]
 
 
 def build_tracks(segments: list[Segments], pairs: dict[tuple[int, int], list[tuple[int, int]]]) -> list[Track]:

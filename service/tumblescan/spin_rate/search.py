@@ -1,0 +1,173 @@
+"""Starting values for the rigid fit, and the choice among many starts.
+
+The rigid cost has several basins on short arcs: a rate-tilt valley, half or double the rate (a
+target that looks alike after half a turn), and, with the axis near the image plane, axes that
+turn the image almost not at all. So the fit is started from many places, each started fit is
+carried a few steps, and the winner is the one with the lowest robust cost on a common scale
+(each fit's own Cauchy scale would favour a fit that calls more of the data outliers).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._typing import FloatArray, Progress
+from .rigid import Observations, RigidFit, cauchy_cost, fibonacci_sphere, fit_rigid, scan_cost
+from .rotation import mirror_twin
+
+SCAN_AXES = 256
+SCAN_TRACKS = 12
+SCAN_CLIP_PX = 5.0
+PLANE_AXIS_STEP_DEG = 6.0
+PLANE_TILTS_DEG = (-8.0, 0.0, 8.0)
+RATE_FACTORS = (0.5, 2.0 / 3.0, 1.5, 2.0)
+SHORT_NFEV = 25
+# A fit whose lines lie mostly farther from the centre than the target's size is implausible: a
+# slow rate with the lines far away mimics the image motion of a fast one near the centre.
+MAX_LINE_DISTANCE_RADII = 2.0
+# A centre velocity (2 parameters) is kept when it lowers χ² by more than this: a slow drift of the
+# target across the image is otherwise absorbed by a wrong rate (measured: 1.7 and 6 % off).
+DRIFT_DELTA_CHI2 = 25.0
+Start = tuple[float, FloatArray, FloatArray]
+
+
+def scan_subset(obs: Observations) -> Observations:
+    """The ``SCAN_TRACKS`` longest tracks (the scan is linear in the number of observations)."""
+    lengths = np.bincount(obs.track)
+    keep = np.argsort(-lengths)[:SCAN_TRACKS]
+    sel = np.isin(obs.track, keep)
+    remap = np.full(len(lengths), -1)
+    remap[keep] = np.arange(len(keep))
+    return Observations.build(remap[obs.track[sel]], obs.t_s[sel], obs.ends_px[sel], obs.K)
+
+
+def plane_axes(step_deg: float = PLANE_AXIS_STEP_DEG, tilts_deg: tuple[float, ...] = PLANE_TILTS_DEG) -> FloatArray:
+    """Axes (N, 3) near the image plane: every ``step_deg`` of projected direction over a full turn
+    (a and -a are opposite senses), tilted by ``tilts_deg`` toward the line of sight. The sphere's
+    scan is too coarse there (about 13° between axes) for a valley as narrow as the one of an axis
+    that barely turns the image."""
+    phi = np.radians(np.arange(0.0, 360.0, step_deg))
+    out = []
+    for tilt in np.radians(tilts_deg):
+        c, s = np.cos(tilt), np.sin(tilt)
+        out.append(np.column_stack([c * np.cos(phi), c * np.sin(phi), np.full_like(phi, s)]))
+    return np.vstack(out)
+
+
+def scan_starts(
+    obs: Observations, omegas: FloatArray, c0: FloatArray, radius: float, t_ref: float, coarse: list[float],
+    sense_hint: int, progress: Progress,
+) -> list[Start]:  # fmt: skip
+    """Starts (ω, axis, c0), best first: a scan over rates and axes on the longest tracks, then the
+    best few basins (and the periodogram's peaks) polished by Nelder-Mead over (ω, axis, c0_xy).
+    Without a sense from the image rotation (the axis may lie near the image plane) a dense set of
+    image-plane axes joins the sphere."""
+    from scipy.optimize import minimize
+
+    sub = scan_subset(obs)
+    axes = fibonacci_sphere(SCAN_AXES)
+    # With a sense: the hemisphere the image rotation points to (and a band along the image plane).
+    axes = axes[sense_hint * axes[:, 2] > -0.15] if sense_hint else np.vstack([axes, plane_axes()])
+    C = scan_cost(sub, omegas, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
+    progress("scan", 0.7)
+    cands = [(float(omegas[k]), axes[a]) for k, a in _basins(C, 3)]
+    if not sense_hint:  # the best basins among the image-plane axes alone, which the sphere's outshine
+        n_plane = len(plane_axes())
+        cands += [(float(omegas[k]), axes[len(axes) - n_plane + a]) for k, a in _basins(C[:, -n_plane:], 2)]
+    for w in coarse:
+        k = int(np.argmin(np.abs(omegas - w)))
+        cands.append((w, axes[int(np.argmin(C[k]))]))
+
+    def cost(x: FloatArray, a0: FloatArray) -> float:
+        a = a0 + np.array([x[1], x[2], x[3]])
+        a = a / np.linalg.norm(a)
+        c = np.array([c0[0] + x[4], c0[1] + x[5], 1.0])
+        return float(scan_cost(sub, np.array([x[0]]), a[None], c, t_ref, radius, clip_px=SCAN_CLIP_PX)[0, 0])
+
+    polished: list[tuple[float, float, FloatArray, FloatArray]] = []
+    for w0, a0 in cands:
+        x0 = np.array([w0, 0, 0, 0, 0, 0])
+        simplex = x0 + np.vstack([np.zeros(6), np.diag([0.05 * w0, 0.15, 0.15, 0.15, radius * 0.2, radius * 0.2])])
+        r = minimize(cost, x0, args=(a0,), method="Nelder-Mead",
+                     options={"initial_simplex": simplex, "maxfev": 250, "xatol": 1e-6, "fatol": 1e-3})  # fmt: skip
+        a = a0 + r.x[1:4]
+        a = a / np.linalg.norm(a)
+        c = np.array([c0[0] + r.x[4], c0[1] + r.x[5], 1.0])
+        polished.append((float(r.fun), float(r.x[0]), a, c))
+    polished.sort(key=lambda p: p[0])
+    return [(w, a, c) for _, w, a, c in polished[: 3 + (0 if sense_hint else 2)]]
+
+
+def _basins(C: FloatArray, n: int) -> list[tuple[int, int]]:
+    """The ``n`` best (rate index, axis index) of a scan (rates, axes), rates over 2 steps apart."""
+    picks: list[tuple[int, int]] = []
+    for k in np.argsort(C.min(axis=1)):
+        if all(abs(k - s) > 2 for s, _ in picks):
+            picks.append((int(k), int(np.argmin(C[k]))))
+        if len(picks) == n:
+            break
+    return picks
+
+
+def common_costs(fits: list[RigidFit], radius: float | None = None, centre: FloatArray | None = None) -> FloatArray:
+    """Each fit's Cauchy cost at one scale, the smallest of the fits' own (2 × 1.4826 × MAD, at least
+    0.05 px): fits of the same observations compared alike. With ``radius`` (the target's radius in
+    units of the range) and ``centre`` (its centre guess, depth 1), fits whose axis misses the
+    target or whose median line lies over ``MAX_LINE_DISTANCE_RADII`` radii from the axis cost
+    infinity, unless all do."""
+    scale = min(max(2.0 * 1.4826 * float(np.median(np.abs(f.residuals_px))), 0.05) for f in fits)
+    cost = np.array([cauchy_cost(f.residuals_px, scale) for f in fits])
+    if radius is not None and centre is not None:
+        far = np.zeros(len(fits), dtype=bool)
+        for k, f in enumerate(fits):
+            miss, to_lines = centre_distance(f, centre)
+            far[k] = max(miss, float(np.median(to_lines))) > MAX_LINE_DISTANCE_RADII * radius
+        if not far.all():
+            cost[far] = np.inf
+    return cost
+
+
+def centre_distance(fit: RigidFit, centre: FloatArray) -> tuple[float, FloatArray]:
+    """How far the fit puts the body from the target seen in the images, in units of the range:
+    the distance from ``centre`` (3,) (the target's centre guess, depth 1) to the axis line, and
+    each line's distance (T,) from the axis point ``q`` nearest ``centre``. Both ignore where the
+    centre sits along the axis (a gauge of the model)."""
+    a = fit.axis
+    q = fit.c0 + ((centre - fit.c0) @ a) * a
+    to_lines = np.linalg.norm(np.cross(fit.c0 + fit.lines_p - q, fit.lines_d), axis=1)
+    return float(np.linalg.norm(centre - q)), np.asarray(to_lines, dtype=float)
+
+
+def best_of_starts(
+    obs: Observations, starts: list[Start], t_ref: float, w_lo: float, w_hi: float, centre: FloatArray,
+    radius: float,
+) -> RigidFit:  # fmt: skip
+    """Short fits from every start and from each one's weak-perspective twin; then from the leader
+    at ``RATE_FACTORS`` times its rate (inside ``[w_lo, w_hi]``), each with the best axis of the
+    scan at that rate. The lowest common-scale cost wins and is carried to convergence."""
+    trials = [fit_rigid(obs, w0, a0, cc, t_ref, max_nfev=SHORT_NFEV, passes=1) for w0, a0, cc in starts]
+    trials += [
+        fit_rigid(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref, max_nfev=SHORT_NFEV, passes=1) for f in trials
+    ]
+    lead = trials[int(np.argmin(common_costs(trials, radius, centre)))]
+    scan_obs = scan_subset(obs)
+    axes = fibonacci_sphere(SCAN_AXES)
+    for factor in RATE_FACTORS:
+        w = factor * lead.omega_rad_s
+        if not w_lo <= w <= w_hi:
+            continue
+        C = scan_cost(scan_obs, np.array([w]), axes, lead.c0, t_ref, radius, clip_px=SCAN_CLIP_PX)[0]
+        for a0 in (lead.axis, axes[int(np.argmin(C))]):
+            trials.append(fit_rigid(obs, w, a0, lead.c0, t_ref, max_nfev=SHORT_NFEV, passes=1))
+    best = trials[int(np.argmin(common_costs(trials, radius, centre)))]
+    return fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t_ref)
+
+
+def with_drift_if_needed(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
+    """``fit`` refitted with a centre velocity in the image plane when that lowers
+    ``χ² = 2·cost/σ²`` (common Cauchy scale, σ the moving fit's robust residual scale) by over
+    ``DRIFT_DELTA_CHI2``; else ``fit``."""
+    moving = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=True)
+    cost = common_costs([fit, moving])
+    s2 = max(1.4826 * float(np.median(np.abs(moving.residuals_px))), 0.01) ** 2  # the larger model's, as in an F test
+    return moving if 2.0 * (cost[0] - cost[1]) / s2 > DRIFT_DELTA_CHI2 else fit
