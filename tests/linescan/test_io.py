@@ -231,3 +231,56 @@ def test_bad_ply_files_get_specific_errors(tmp_path: Path) -> None:
     write_ply(tmp_path / "order.ply", order)
     with pytest.raises(TimeOrderError, match="within frame 0"):
         read_ply(tmp_path / "order.ply")
+
+
+GOOD_MOTION = {
+    "spin_axis": [0.0, 0.0, 1.0],
+    "spin_rate_deg_s": 10.0,
+    "precession_axis": [0.0, 1.0, 0.0],
+    "precession_rate_deg_s": 2.0,
+    "center_m": [0.0, 0.0, 50.0],
+    "reference_time_s": 0.0,
+}
+
+
+@pytest.mark.parametrize(
+    ("content", "field", "says"),
+    [
+        (b"\xff\xfe not json", "truth", "not JSON"),
+        (b"[1, 2]", "truth", "no 'motion'"),
+        (json.dumps({"motion": {**GOOD_MOTION, "spin_axis": [0, 1]}}).encode(), "truth.motion.spin_axis", "3 finite"),
+        (
+            json.dumps({"motion": {k: v for k, v in GOOD_MOTION.items() if k != "precession_rate_deg_s"}}).encode(),
+            "truth.motion.precession_rate_deg_s",
+            "finite number",
+        ),
+    ],
+)
+def test_a_truth_file_that_is_not_one_is_refused_naming_what_is_wrong(
+    tmp_path: Path, content: bytes, field: str, says: str
+) -> None:
+    from tumblescan.linescan.truth import load_truth
+
+    path = tmp_path / "truth.json"
+    path.write_bytes(content)
+    with pytest.raises(MalformedInputError) as err:
+        load_truth(path)
+    assert err.value.field == field and says in str(err.value)
+    assert "Error" not in str(err.value)  # no Python exception names in what a user reads
+
+
+def test_a_truth_file_round_trips(tmp_path: Path) -> None:
+    from tumblescan.linescan.truth import load_truth
+
+    path = tmp_path / "truth.json"
+    path.write_text(json.dumps({"motion": GOOD_MOTION}))
+    motion = load_truth(path)
+    assert np.isclose(np.degrees(motion.spin_rate_rad_s), 10.0) and np.allclose(motion.center_m, [0, 0, 50])
+
+
+def test_tracks_nested_too_deeply_are_refused_naming_tracks() -> None:
+    from tumblescan.linescan.tracks_io import tracks_from_json
+
+    with pytest.raises(MalformedInputError, match="nests too deeply") as err:
+        tracks_from_json("[" * 100_000 + "]" * 100_000)
+    assert err.value.field == "tracks"

@@ -64,6 +64,8 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], object], str, str]] = [
     ("too little", lambda d: d.__setitem__("observations", d["observations"][:5]), "too_few_frames", "observations"),
     ("unknown field", _set(["colour"], "red"), "unknown_field", "colour"),
     ("format", _set(["format"], "other"), "malformed_input", "format"),
+    # Past int64 it once ended as an OverflowError traceback in the CLI.
+    ("frame past 2^53", _set(["observations", 2, "frame"], 10**30), "malformed_input", "observations[2].frame"),
 ]
 
 
@@ -110,3 +112,11 @@ def test_garbage_file_is_refused_naming_the_part(tmp_path: Path) -> None:
     with pytest.raises(InputError) as err:
         read_markers(tmp_path / "m.bin")
     assert err.value.code == "malformed_input" and err.value.field == "markers"
+
+
+def test_json_nested_too_deeply_is_refused_naming_the_part(tmp_path: Path) -> None:
+    path = tmp_path / "markers.json"
+    path.write_text('{"a": ' * 100_000 + "1" + "}" * 100_000)
+    with pytest.raises(InputError, match="nests too deeply") as err:
+        read_markers(path)
+    assert err.value.field == "markers"

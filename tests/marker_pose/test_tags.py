@@ -126,6 +126,7 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], None], str, str]] = [
     ),
     ("unknown field", _set(["cameras", 0, "fov"], 1.0), "unknown_field", "cameras[0].fov"),
     ("too few", lambda d: d.__setitem__("detections", d["detections"][:2]), "too_few_frames", "detections"),
+    ("frame past 2^53", _set(["detections", 3, "frame"], 2**63), "malformed_input", "detections[3].frame"),
 ]
 
 

@@ -77,6 +77,12 @@ def test_bad_meta_and_a_corrupt_frame_are_422(http: httpx.Client, los_seq: Path,
     files = _files(los_seq)[:-1]  # the last frame missing
     r = http.post("/v1/jobs/upload", data={"kind": "spin-from-images"}, files=files)
     assert r.status_code == 422 and r.json()["detail"]["field"].endswith(".file")
+    # A frame meta.json does not list was once ignored silently (a wrong or renamed file).
+    files = [*_files(los_seq), ("frames", ("stray.png", _files(los_seq)[-1][1][1]))]
+    r = http.post("/v1/jobs/upload", data={"kind": "spin-from-images"}, files=files)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["field"] == "frames" and "stray.png" in detail["message"]
 
 
 def test_blank_frames_fail_the_job_with_no_target(http: httpx.Client, blank_seq: Path) -> None:

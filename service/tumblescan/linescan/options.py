@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..errors import InvalidOptionError
 from .choices import ModelChoice, Objective, Strategy
 from .sensor import SensorNoise
 from .swarm import SwarmConfig
@@ -46,6 +47,24 @@ class CommonOptions(BaseModel):
     sensor: SensorNoise | None = Field(None, description="overrides the noise declared with the input")
     validation_frames: int | None = Field(None, ge=MIN_FRAMES, description="frames in the second solve")
     significance: float = Field(1e-3, gt=0, lt=0.5, description="level of the model and similarity tests")
+
+    def reference_time(self, t_first_s: float, t_last_s: float) -> float:
+        """The time T the motion is stated at: the option, or the first observation's time.
+
+        T may lie outside the observations by at most their span (at least 1 s): the phase
+        ω·(t - T) of a far T loses the digits the fit needs, and the estimate would fail its
+        own validation after a full run instead of being refused here.
+        """
+        if self.reference_time_s is None:
+            return t_first_s
+        reach_s = max(t_last_s - t_first_s, 1.0)
+        if not t_first_s - reach_s <= self.reference_time_s <= t_last_s + reach_s:
+            raise InvalidOptionError(
+                f"options.reference_time_s = {self.reference_time_s:g} s lies too far from the observations "
+                f"({t_first_s:g} to {t_last_s:g} s): keep it within {reach_s:g} s of them",
+                field="options.reference_time_s",
+            )
+        return self.reference_time_s
 
 
 class TracksOptions(CommonOptions):

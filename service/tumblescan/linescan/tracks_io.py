@@ -125,6 +125,8 @@ def _decode(doc: str | bytes) -> Any:
         raise MalformedInputError(
             f"tracks are not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}", field="tracks"
         ) from None
+    except RecursionError:  # Python's parser gives up near 1000 levels
+        raise MalformedInputError("tracks: the JSON nests too deeply to read", field="tracks") from None
 
 
 def _observation(i: int, o: Any, has_frame: bool) -> tuple[str, float, list[float], int | None]:

@@ -66,10 +66,43 @@ def errors_against(result: MotionResult, truth: Motion) -> dict[str, float]:
 
 
 def load_truth(path: Path) -> Motion:
-    """The ``motion`` of a ``truth.json`` written by ``tumblescan simulate``."""
+    """The ``motion`` of a ``truth.json`` written by ``tumblescan simulate``; a file that is not
+    one is refused naming what is wrong (not JSON, no ``motion``, or which of its fields)."""
     try:
-        return motion_from_json(json.loads(path.read_text())["motion"])
-    except (ValueError, KeyError, TypeError) as exc:
+        doc = json.loads(path.read_bytes())
+    except (ValueError, RecursionError):
+        raise MalformedInputError("'truth' is not JSON (a truth.json from simulate)", field="truth") from None
+    motion = doc.get("motion") if isinstance(doc, dict) else None
+    if not isinstance(motion, dict):
         raise MalformedInputError(
-            f"'truth' is not a simulation truth file ({type(exc).__name__}: {exc})", field="truth"
+            "'truth' has no 'motion' object (a truth.json from simulate)", field="truth"
         ) from None
+    for key, size in MOTION_FIELDS.items():
+        value = motion.get(key)
+        ok = (
+            _is_finite_number(value)
+            if size == 0
+            else (isinstance(value, list) and len(value) == size and all(_is_finite_number(v) for v in value))
+        )
+        if not ok:
+            what = "a finite number" if size == 0 else f"a list of {size} finite numbers"
+            raise MalformedInputError(f"'truth': motion.{key} must be {what}", field=f"truth.motion.{key}")
+    try:
+        return motion_from_json(motion)
+    except ValueError as exc:  # e.g. a zero-length axis
+        raise MalformedInputError(f"'truth': the motion is not valid: {exc}", field="truth.motion") from None
+
+
+# Each field of a truth file's motion: 0 for a number, else the length of its vector.
+MOTION_FIELDS = {
+    "spin_axis": 3,
+    "spin_rate_deg_s": 0,
+    "precession_axis": 3,
+    "precession_rate_deg_s": 0,
+    "center_m": 3,
+    "reference_time_s": 0,
+}
+
+
+def _is_finite_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))

@@ -12,7 +12,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -117,6 +117,8 @@ def _load_json(path: Path, name: str) -> Any:
         return json.loads(path.read_bytes())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MalformedInputError(f"{name} is not valid JSON: {exc}", field=name) from None
+    except RecursionError:  # Python's parser gives up near 1000 levels
+        raise MalformedInputError(f"{name}: the JSON nests too deeply to read", field=name) from None
 
 
 def _csv_observations(text: str) -> list[dict[str, Any]]:
@@ -179,6 +181,15 @@ def markers_from_json(
 
 def _is_number(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+# The largest integer JSON (a double) carries exactly; frame numbers are stored as int64.
+MAX_FRAME_NUMBER = 2**53 - 1
+
+
+def is_frame_number(v: Any) -> TypeGuard[int]:
+    """An integer frame number in [0, MAX_FRAME_NUMBER]."""
+    return isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= MAX_FRAME_NUMBER
 
 
 def _check_units(units: Any) -> None:
@@ -297,9 +308,9 @@ def _observations(
             key = sorted(extra)[0]
             raise UnknownFieldError(f"unknown field observations[{i}].{key}", field=f"observations[{i}].{key}")
         f, ti, tr, p = o.get("frame"), o.get("t"), o.get("track"), o.get("xyz")
-        if not isinstance(f, int) or isinstance(f, bool) or f < 0:
+        if not is_frame_number(f):
             raise MalformedInputError(
-                f"observations[{i}].frame must be an integer >= 0", field=f"observations[{i}].frame"
+                f"observations[{i}].frame must be an integer in [0, 2^53)", field=f"observations[{i}].frame"
             )
         if not _is_number(ti):
             raise MalformedInputError(f"observations[{i}].t must be a number [s]", field=f"observations[{i}].t")

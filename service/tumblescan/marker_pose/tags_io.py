@@ -26,7 +26,7 @@ from .errors import (
     TooFewFramesError,
     UnknownFieldError,
 )
-from .markers_io import _check_units, _is_number, _load_json
+from .markers_io import _check_units, _is_number, _load_json, is_frame_number
 from .options import MarkerPoseLimits
 from .tag_camera import RigCamera, tag_corners_body
 
@@ -260,8 +260,10 @@ def _frames(value: Any, limits: MarkerPoseLimits) -> dict[int, float]:
         if not isinstance(f, dict) or set(f) != {"frame", "t"}:
             raise MalformedInputError(f"frames[{i}] must be {{frame, t}}", field=f"frames[{i}]")
         n, t = f["frame"], f["t"]
-        if not isinstance(n, int) or isinstance(n, bool) or n < 0 or not _is_number(t):
-            raise MalformedInputError(f"frames[{i}] needs an integer frame >= 0 and a time t", field=f"frames[{i}]")
+        if not is_frame_number(n) or not _is_number(t):
+            raise MalformedInputError(
+                f"frames[{i}] needs an integer frame in [0, 2^53) and a time t", field=f"frames[{i}]"
+            )
         if n in out:
             raise DuplicateObservationError(f"frame {n} is listed twice", field=f"frames[{i}].frame")
         out[n] = float(t)
@@ -292,8 +294,8 @@ def _detections(dets: list[Any], out: TagInput, frame_t: dict[int, float] | None
         if extra:
             raise UnknownFieldError(f"unknown field {where}.{extra[0]}", field=f"{where}.{extra[0]}")
         f, ti, c, tid = d.get("frame"), d.get("t"), d.get("camera"), d.get("id")
-        if not isinstance(f, int) or isinstance(f, bool) or f < 0:
-            raise MalformedInputError(f"{where}.frame must be an integer >= 0", field=f"{where}.frame")
+        if not is_frame_number(f):
+            raise MalformedInputError(f"{where}.frame must be an integer in [0, 2^53)", field=f"{where}.frame")
         if ti is None and frame_t is not None and f in frame_t:
             ti = frame_t[f]
         if not _is_number(ti):

@@ -26,6 +26,8 @@ def load_input(meta_path: Path, frame_files: dict[str, Path] | None = None) -> S
     """Validate meta.json and read its frames (``frame_files``: file name in meta -> path, else
     relative to meta.json). Every ``invalid_input`` and ``unreadable_image`` is raised here."""
     meta = read_meta(meta_path)
+    if frame_files is not None:
+        _refuse_unlisted(frame_files, [fr.file for fr in meta.frames])
     grays, full = [], 255.0
     for i, fr in enumerate(meta.frames):
         field = f"frames.{i}.file"
@@ -44,6 +46,16 @@ def load_input(meta_path: Path, frame_files: dict[str, Path] | None = None) -> S
         full = max(full, float(np.iinfo(raw.dtype).max) if np.issubdtype(raw.dtype, np.integer) else 255.0)
         grays.append(gray)
     return Sequence(grays, np.array([f.t_s for f in meta.frames]), full, meta)
+
+
+def _refuse_unlisted(frame_files: dict[str, Path], listed: list[str]) -> None:
+    """An uploaded frame meta.json does not list is a mistake (a wrong or renamed file), not
+    something to ignore silently."""
+    known = set(listed) | {Path(name).name for name in listed}
+    unlisted = sorted(name for name in frame_files if name not in known)
+    if unlisted:
+        more = f" (and {len(unlisted) - 1} more)" if len(unlisted) > 1 else ""
+        raise InputError(f"frames: {unlisted[0]}{more} is not listed in meta.json's frames", field="frames")
 
 
 def _frame_path(meta_path: Path, name: str, frame_files: dict[str, Path] | None) -> Path | None:

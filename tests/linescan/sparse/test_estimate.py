@@ -119,6 +119,16 @@ def test_reference_time_option_moves_the_reported_spin_axis() -> None:
     assert np.allclose(r.spin.axis, motion.spin_axis_at(3.0), atol=1e-9)
 
 
+@pytest.mark.parametrize("reference_time_s", [1e300, -1e6])
+def test_a_reference_time_far_from_the_observations_is_an_option_error(reference_time_s: float) -> None:
+    # 1e300 once ended as internal_error (LinAlgError: SVD did not converge), 1e6 as a long run
+    # that failed its own validation.
+    _, tracks = tracks_for(1)
+    with pytest.raises(InvalidOptionError, match="too far from the observations") as err:
+        estimate_motion(tracks, EstimateOptions(reference_time_s=reference_time_s))
+    assert err.value.field == "options.reference_time_s"
+
+
 def test_a_bad_validation_frame_count_is_an_option_error() -> None:
     _, tracks = tracks_for(1)
     with pytest.raises(InvalidOptionError, match="validation_frames"):

@@ -119,7 +119,7 @@ def estimate_from_frames(
 def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> MotionResult:
     started = time.perf_counter()
     cloud = frames.cloud
-    T = float(cloud.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
+    T = opts.reference_time(float(cloud.t_s.min()), float(cloud.t_s.max()))
     n_frames = frames.n_frames
     n2 = validation_frame_count(n_frames, opts.validation_frames)
     # 1. Thin every frame for registration; the dense fit uses every point.

@@ -91,7 +91,7 @@ def _silent(stage: str, fraction: float) -> None:
 
 def _estimate(tracks: Tracks, opts: TracksOptions, progress: Progress) -> MotionResult:
     started = time.perf_counter()
-    T = float(tracks.t_s.min()) if opts.reference_time_s is None else opts.reference_time_s
+    T = opts.reference_time(float(tracks.t_s.min()), float(tracks.t_s.max()))
     noise = opts.sensor or tracks.sensor or SensorNoise()
     n2 = validation_frame_count(tracks.n_frames, opts.validation_frames)
     run = _Run(T, noise, n2, opts, np.random.default_rng(opts.seed), progress)
