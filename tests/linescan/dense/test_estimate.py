@@ -209,7 +209,10 @@ def test_cli_estimates_frames_and_writes_the_rectified_cloud(frames_ply: Path, e
     )
     assert proc.returncode == 0, proc.stderr
     result = MotionResult.model_validate_json(proc.stdout)
-    assert result.spin.rate_deg_s == pytest.approx(estimated.spin.rate_deg_s, abs=1e-9)
+    # The same pipeline as in process; Open3D's threaded registration makes two runs differ by a few
+    # 1e-5 deg/s under load, far inside the estimate's own uncertainty.
+    wobble = 0.1 * estimated.uncertainty.spin_rate_deg_s
+    assert result.spin.rate_deg_s == pytest.approx(estimated.spin.rate_deg_s, abs=wobble)
     original, rectified = read_ply(frames_ply), read_ply(out)
     assert len(rectified) == len(original)
     assert set(rectified.fields) == {"frame", "line", "intensity"}
