@@ -19,16 +19,38 @@ def _frame_bgr(gray: np.ndarray) -> np.ndarray:
     import cv2
 
     lo, hi = float(np.percentile(gray, 1)), float(np.percentile(gray, 99.9))
-    g8 = np.clip((gray - lo) * 255.0 / max(hi - lo, 1e-9), 0, 255).astype(np.uint8)
-    return np.asarray(cv2.cvtColor(g8, cv2.COLOR_GRAY2BGR))
+    # A square-root stretch: dark solar panels beside a sunlit bus stay visible.
+    g = np.sqrt(np.clip((gray - lo) / max(hi - lo, 1e-9), 0.0, 1.0))
+    return np.asarray(cv2.cvtColor((255.0 * g).astype(np.uint8), cv2.COLOR_GRAY2BGR))
+
+
+def _target_box(grays: list[np.ndarray]) -> tuple[int, int, int, int]:
+    """A square (x0, y0, x1, y1) holding the target in every frame given, with a margin: the
+    strip's tiles show the target, not the empty sky around it."""
+    h, w = grays[0].shape
+    ys, xs = [], []
+    for gray in grays:
+        lo, hi = float(np.percentile(gray, 50)), float(np.percentile(gray, 99.9))
+        yy, xx = np.nonzero(gray > lo + 0.05 * (hi - lo))
+        if len(xx) > 20:  # a few hot pixels or stars are not a target
+            ys += [float(np.percentile(yy, 0.5)), float(np.percentile(yy, 99.5))]
+            xs += [float(np.percentile(xx, 0.5)), float(np.percentile(xx, 99.5))]
+    if not xs:
+        return 0, 0, w, h
+    cx, cy = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    half = min(max(max(xs) - min(xs), max(ys) - min(ys), 32.0) * 0.6, max(w, h) / 2)
+    x0, y0 = int(max(0, min(cx - half, w - 2 * half))), int(max(0, min(cy - half, h - 2 * half)))
+    return x0, y0, int(min(w, x0 + 2 * half)), int(min(h, y0 + 2 * half))
 
 
 def strip_png(seq: Sequence, result: dict[str, Any], n: int = 6) -> bytes:
-    """Up to ``n`` frames side by side (scaled to 200 px) with their tracked lines in green."""
+    """Up to ``n`` frames side by side, cropped to the target and scaled to 200 px, with their
+    tracked lines in green."""
     import cv2
 
     tracks = result.get("tracks") or []
     idx = np.unique(np.linspace(0, len(seq.grays) - 1, n).round().astype(int))
+    bx0, by0, bx1, by1 = _target_box([seq.grays[k] for k in idx])
     tiles = []
     for k in idx:
         img = _frame_bgr(seq.grays[k])
@@ -36,6 +58,7 @@ def strip_png(seq: Sequence, result: dict[str, Any], n: int = 6) -> bytes:
             if ob["frame"] == k:
                 (x1, y1), (x2, y2) = ob["ends_px"]
                 cv2.line(img, (round(x1), round(y1)), (round(x2), round(y2)), LINE_BGR, 1, cv2.LINE_AA)
+        img = img[by0:by1, bx0:bx1]
         s = 200.0 / img.shape[1]
         tiles.append(cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA))
     return bytes(cv2.imencode(".png", np.hstack(tiles))[1].tobytes())
