@@ -57,6 +57,35 @@ def _ellipsoid(p: np.ndarray, cov: np.ndarray, n: int = 12) -> tuple[np.ndarray,
     return pts[..., 0], pts[..., 1], pts[..., 2]
 
 
+def _add_ellipsoids(fig: Any, targets: list[dict[str, Any]], origin: np.ndarray) -> None:
+    """The 1σ ellipsoids of (at most MAX_ELLIPSOIDS of) ``targets``, in green."""
+    import plotly.graph_objects as go
+
+    for t in targets[:MAX_ELLIPSOIDS]:
+        x, y, z = _ellipsoid(np.asarray(t["position_m"]) - origin, np.asarray(t["cov_m2"]))
+        fig.add_trace(
+            go.Surface(
+                x=x,
+                y=y,
+                z=z,
+                opacity=0.3,
+                showscale=False,
+                colorscale=[[0, "green"], [1, "green"]],
+                hoverinfo="skip",
+                showlegend=False,
+            )
+        )
+
+
+def _scene_layout(fig: Any, *, height: int) -> None:
+    """True proportions, metres on every axis."""
+    fig.update_layout(
+        height=height,
+        scene={"aspectmode": "data", "xaxis_title": "x (m)", "yaxis_title": "y (m)", "zaxis_title": "z (m)"},
+        margin={"l": 0, "r": 0, "t": 30, "b": 0},
+    )
+
+
 def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
     import plotly.graph_objects as go
 
@@ -118,20 +147,7 @@ def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
                 name="targets (frame 0)",
             )
         )
-        for t in targets[:MAX_ELLIPSOIDS]:
-            x, y, z = _ellipsoid(np.asarray(t["position_m"]) - origin, np.asarray(t["cov_m2"]))
-            fig.add_trace(
-                go.Surface(
-                    x=x,
-                    y=y,
-                    z=z,
-                    opacity=0.3,
-                    showscale=False,
-                    colorscale=[[0, "green"], [1, "green"]],
-                    hoverinfo="skip",
-                    showlegend=False,
-                )
-            )
+        _add_ellipsoids(fig, targets, origin)
     # Every frame's targets, faint, to show the tracks.
     allp = [np.array(t["position_m"]) - origin for fr in result["frames"][1:] for t in fr["targets"]]
     if allp:
@@ -146,11 +162,7 @@ def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
                 name="targets (later frames)",
             )
         )
-    fig.update_layout(
-        height=700,
-        scene={"aspectmode": "data", "xaxis_title": "x (m)", "yaxis_title": "y (m)", "zaxis_title": "z (m)"},
-        margin={"l": 0, "r": 0, "t": 30, "b": 0},
-    )
+    _scene_layout(fig, height=700)
     note = (
         "<p class='note'>Frame 0: stations, bearing rays (blue: associated, red: unassociated), located targets "
         "(green; orange if ambiguous) and their 1-sigma ellipsoids; later frames in gray. Coordinates are metres from "
@@ -199,25 +211,8 @@ def _close_up(inp: BearingsInput, result: dict[str, Any]) -> str:
                 x=a[:, 0], y=a[:, 1], z=a[:, 2], mode="markers", marker={"size": 2, "color": "gray"}, name="untracked"
             )
         )
-    for t in result["frames"][0]["targets"][:MAX_ELLIPSOIDS]:
-        x, y, z = _ellipsoid(np.asarray(t["position_m"]) - origin, np.asarray(t["cov_m2"]))
-        fig.add_trace(
-            go.Surface(
-                x=x,
-                y=y,
-                z=z,
-                opacity=0.25,
-                showscale=False,
-                colorscale=[[0, "green"], [1, "green"]],
-                hoverinfo="skip",
-                showlegend=False,
-            )
-        )
-    fig.update_layout(
-        height=600,
-        scene={"aspectmode": "data", "xaxis_title": "x (m)", "yaxis_title": "y (m)", "zaxis_title": "z (m)"},
-        margin={"l": 0, "r": 0, "t": 30, "b": 0},
-    )
+    _add_ellipsoids(fig, result["frames"][0]["targets"], origin)
+    _scene_layout(fig, height=600)
     note = (
         "<p class='note'>The targets alone: each track's fixes joined in time order (one colour per track), "
         "untracked fixes in gray, frame 0's 1-sigma ellipsoids in green. Same coordinates as above.</p>"
