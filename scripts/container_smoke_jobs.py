@@ -68,7 +68,7 @@ RECIPES: dict[str, Recipe] = {
         ],
     ),
     "spin-from-images": Recipe(
-        simulate="tumblescan spin-from-images simulate --out {out} --seed 3 --width-px 256 --frames 12",
+        simulate="tumblescan spin-from-images simulate --out {out} --seed 3",
         jobs=[Job("image sequence", {"meta": "meta.json", "frames": "frames/*.png"})],
     ),
     "bearings": Recipe(
