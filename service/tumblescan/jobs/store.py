@@ -285,12 +285,11 @@ class JobStore:
         from_status: tuple[str, ...] = ("running",),
         attempt: int | None = None,
     ) -> bool:
-        fence = [] if attempt is None else [jobs.c.attempts == attempt]
         with self._tx() as conn:
             return bool(
                 conn.execute(
                     update(jobs)
-                    .where(jobs.c.id == job_id, jobs.c.status.in_(from_status), *fence)
+                    .where(jobs.c.id == job_id, jobs.c.status.in_(from_status), *_as_attempt(attempt))
                     .values(
                         status="failed", stage="failed", finished_at=time.time(), error_code=code, error_message=message
                     )
@@ -461,5 +460,9 @@ def _engine(url: str) -> Engine:
 
 def _running(job_id: str, attempt: int | None) -> list[Any]:
     """The job is running, and (when ``attempt`` is given) as that attempt."""
-    where = [jobs.c.id == job_id, jobs.c.status == "running"]
-    return where if attempt is None else [*where, jobs.c.attempts == attempt]
+    return [jobs.c.id == job_id, jobs.c.status == "running", *_as_attempt(attempt)]
+
+
+def _as_attempt(attempt: int | None) -> list[Any]:
+    """The fence of a run's writes: no condition without an attempt number."""
+    return [] if attempt is None else [jobs.c.attempts == attempt]
