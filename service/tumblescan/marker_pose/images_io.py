@@ -13,7 +13,8 @@ from __future__ import annotations
 import re
 import time
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,11 +47,32 @@ class ImageSet:
     members: dict[tuple[int, int], str]  # (camera, frame index) -> member name (relative path)
 
     def read(self, key: tuple[int, int]) -> np.ndarray:
+        """One image, decoded (a zip is opened for it alone: to read many, iterate ``decoded``)."""
+        with self._reader() as raw:
+            return self._decode(key, raw(self.members[key]))
+
+    def decoded(self) -> Iterator[tuple[tuple[int, int], np.ndarray]]:
+        """Every (camera, frame) key with its image, in frame order. A zip is opened once for all of
+        them: each open re-reads the member list (about 57 ms for 20,000 members)."""
+        with self._reader() as raw:
+            for key in self:
+                yield key, self._decode(key, raw(self.members[key]))
+
+    @contextmanager
+    def _reader(self) -> Iterator[Callable[[str], bytes]]:
+        """A member's bytes by name, from the directory or the zip held open meanwhile."""
+        if self.source.is_dir():
+            source = self.source
+            yield lambda name: (source / name).read_bytes()
+        else:
+            with zipfile.ZipFile(self.source) as zf:
+                yield zf.read
+
+    def _decode(self, key: tuple[int, int], data: bytes) -> np.ndarray:
         """The image as 8-bit grey (16-bit images are scaled by their maximum)."""
         import cv2
 
         name = self.members[key]
-        data = self._bytes(name)
         img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
         if img is None or img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):
             raise UnreadableImageError(f"{name} is not a readable 8- or 16-bit grey PNG or TIFF", field=name)
@@ -63,12 +85,6 @@ class ImageSet:
         if img.dtype == np.uint16:
             img = np.round(img.astype(float) * (255.0 / max(float(img.max()), 1.0))).astype(np.uint8)
         return np.asarray(img)
-
-    def _bytes(self, name: str) -> bytes:
-        if self.source.is_dir():
-            return (self.source / name).read_bytes()
-        with zipfile.ZipFile(self.source) as zf:
-            return zf.read(name)
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
         return iter(sorted(self.members, key=lambda k: (k[1], k[0])))
@@ -140,8 +156,7 @@ def _zip_index(path: Path, limits: MarkerPoseLimits, field: str) -> tuple[list[s
 
 def check_images(images: ImageSet, progress: Progress = no_progress) -> None:
     """Decode every image once (unreadable files and wrong sizes are refused now, naming the file)."""
-    for n, key in enumerate(images):
-        images.read(key)
+    for n, _ in enumerate(images.decoded()):
         if n % 50 == 0:
             progress("checking images", 0.05 * n / max(len(images.members), 1))
 
@@ -159,11 +174,10 @@ def detect_tags(
     found = 0
     per_camera = dict.fromkeys((c.id for c in scene.cameras), 0)
     tag_index = {t: i for i, t in enumerate(scene.tag_ids)}
-    keys = list(images)
+    n_images = len(images.members)
     last: dict[int, tuple[int, np.ndarray]] = {}  # camera -> (frame index, corners found there (n, 2))
     full_frames = 0
-    for n, (c, f) in enumerate(keys):
-        image = images.read((c, f))
+    for n, ((c, f), image) in enumerate(images.decoded()):
         roi = _roi(last.get(c), f, image.shape) if options.roi_tracking else None
         if roi is None:
             full_frames += 1
@@ -183,7 +197,7 @@ def detect_tags(
         else:
             last.pop(c, None)
         if n % 10 == 0:
-            progress("detecting tags", 0.05 + 0.25 * n / max(len(keys), 1))
+            progress("detecting tags", 0.05 + 0.25 * n / max(n_images, 1))
     rows.sort(key=lambda r: (r[0], r[1], r[2]))
     data = TagInput(
         cameras=scene.cameras,
@@ -204,11 +218,11 @@ def detect_tags(
         data.warnings.append(f"{found - len(rows)} detections of tags not in the layout were ignored")
     if options.roi_tracking:
         data.warnings.append(
-            f"tags were searched for around the last frame's tags in {len(keys) - full_frames} of {len(keys)} images"
+            f"tags were searched for around the last frame's tags in {n_images - full_frames} of {n_images} images"
         )
     info = DetectionInfo(
         detector="pupil-apriltags" if options.detector == "apriltag" else "opencv aruco",
-        images=len(keys),
+        images=n_images,
         detections=found,
         known_tags=len(rows),
         per_camera=per_camera,
