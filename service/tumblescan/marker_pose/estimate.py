@@ -15,7 +15,7 @@ import numpy as np
 from .._typing import FloatArray, Progress, no_progress
 from .errors import InvalidOptionError
 from .geometry import launch_frame
-from .graph import GraphResult, auto_psd, frame_covariances, markers_graph, motion_graph
+from .graph import GraphResult, auto_psd, frame_covariances, markers_graph, motion_graph, typical_sigma
 from .identify import Association, Gates, associate
 from .layout import bootstrap_layout
 from .markers_io import MarkerInput
@@ -99,7 +99,7 @@ def _our_graph(
     cov = frame_covariances(graph.R, data.obs_frame, assoc.obs_marker, graph.layout_m, sigma, assoc.measured)
     if gauge is not None:
         cov = np.where(np.isnan(graph.cov), cov, graph.cov)
-    q_rot, q_trans = auto_psd(data.t_s, graph.R, graph.t, assoc.measured, _sigma(cov, 0), _sigma(cov, 3))
+    q_rot, q_trans = auto_psd(data.t_s, graph.R, graph.t, assoc.measured, typical_sigma(cov, 0), typical_sigma(cov, 3))
     R, t, C, status, info = motion_graph(
         data.t_s,
         graph.R,
@@ -120,10 +120,3 @@ def _our_graph(
     graph.info["time_s"] += info["time_s"]
     graph.info["psd"] = info["psd"]
     return GraphResult(R, t, C, status, graph.layout_m, graph.layout_sigma_m, graph.info)
-
-
-def _sigma(cov: FloatArray, start: int) -> float:
-    """Typical per-axis 1-sigma of the rotation (start 0) or position (start 3) block."""
-    ok = ~np.isnan(cov[:, 0, 0])
-    block = cov[ok, start : start + 3, start : start + 3]
-    return float(np.sqrt(np.median(np.trace(block, axis1=1, axis2=2) / 3.0))) if ok.any() else 0.01

@@ -307,6 +307,13 @@ def _initial_twist(
     return np.asarray(gtsam.Pose3.Logmap(rel)) / (t_s[b] - t_s[a])
 
 
+def typical_sigma(cov: FloatArray, start: int) -> float:
+    """Typical per-axis 1-sigma of the rotation (start 0) or position (start 3) block."""
+    ok = ~np.isnan(cov[:, 0, 0])
+    block = cov[ok, start : start + 3, start : start + 3]
+    return float(np.sqrt(np.median(np.trace(block, axis1=1, axis2=2) / 3.0))) if ok.any() else 0.01
+
+
 def auto_psd(
     t_s: FloatArray,
     R: FloatArray,

@@ -14,9 +14,8 @@ from .result import MarkerPoseResult
 from .simulate import SimConfig, simulate
 from .tag_estimate import estimate_tag_poses
 from .tag_simulate import TagSimConfig, simulate_tags
-from .tags_io import TagInput, read_tags
-
-TAGS_FORMAT = b"tumblescan.tags.v1"
+from .tags_io import FORMAT as TAGS_FORMAT
+from .tags_io import read_tags
 
 
 def input_level(path: Path) -> str:
@@ -28,12 +27,7 @@ def input_level(path: Path) -> str:
         head = fh.read(4096)
     if head.startswith(b"PK\x03\x04"):
         return "C"
-    return "B" if TAGS_FORMAT in head else "A"
-
-
-def load_tags(tags: Path, limits: MarkerPoseLimits | None = None) -> TagInput:
-    """Read and validate level B (every refusal is an ``InputError`` naming the field)."""
-    return read_tags(tags, limits)
+    return "B" if TAGS_FORMAT.encode() in head else "A"
 
 
 def run_tags(
@@ -43,7 +37,7 @@ def run_tags(
     limits: MarkerPoseLimits | None = None,
     progress: Progress = no_progress,
 ) -> MarkerPoseResult:
-    return estimate_tag_poses(load_tags(tags, limits), options, progress)
+    return estimate_tag_poses(read_tags(tags, limits), options, progress)
 
 
 def load_input(

@@ -15,7 +15,7 @@ import numpy as np
 
 from .._typing import FloatArray, Progress, no_progress
 from .geometry import quat_wxyz, ypr_deg
-from .graph import STATUS_MEASURED, STATUS_MISSING, auto_psd, motion_graph
+from .graph import STATUS_MEASURED, STATUS_MISSING, auto_psd, motion_graph, typical_sigma
 from .options import TagPoseOptions
 from .result import (
     DetectionInfo,
@@ -29,10 +29,9 @@ from .result import (
     Residuals,
     Segment,
 )
+from .result_build import MAX_REJECTIONS_LISTED
 from .tag_pose import FrameFit, fit_tag_poses
 from .tags_io import TagInput
-
-MAX_REJECTIONS_LISTED = 1000
 
 
 def estimate_tag_poses(
@@ -86,7 +85,7 @@ def estimate_tag_poses(
     }
     if options.motion_prior == "constant_velocity" and fit.measured.sum() >= 3:
         progress("graph", 0.6)
-        q_rot, q_trans = auto_psd(data.t_s, R, t, fit.measured, _typical_sigma(cov, 0), _typical_sigma(cov, 3))
+        q_rot, q_trans = auto_psd(data.t_s, R, t, fit.measured, typical_sigma(cov, 0), typical_sigma(cov, 3))
         R, t, cov, status, minfo = motion_graph(
             data.t_s,
             R,
@@ -128,13 +127,6 @@ def residual_sigma_px(fit: FrameFit) -> float:
     if len(r) < 8 or fit.dof <= 0:
         return float(np.sqrt(np.mean(r**2))) if len(r) else 1.0
     return float(max(1.4826 * np.median(r) * np.sqrt(len(r) / fit.dof), 1e-3))
-
-
-def _typical_sigma(cov: FloatArray, start: int) -> float:
-    """Typical per-axis 1-sigma of the rotation (start 0) or position (start 3) block."""
-    ok = ~np.isnan(cov[:, 0, 0])
-    block = cov[ok, start : start + 3, start : start + 3]
-    return float(np.sqrt(np.median(np.trace(block, axis1=1, axis2=2) / 3.0))) if ok.any() else 0.01
 
 
 def _result(
