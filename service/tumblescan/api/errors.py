@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from typing import Any
 
@@ -116,8 +115,5 @@ class InternalErrors:
             log.exception("%s %s failed", scope.get("method"), scope.get("path"))
             if started:  # the answer is half sent: nothing better than cutting it off
                 raise
-            body = {"detail": {"code": "internal_error", "message": "the service failed on this request; it is logged"}}
-            data = json.dumps(body).encode()
-            headers = [(b"content-type", b"application/json"), (b"content-length", str(len(data)).encode())]
-            await send({"type": "http.response.start", "status": 500, "headers": headers})
-            await send({"type": "http.response.body", "body": data})
+            response = error_response(500, "internal_error", "the service failed on this request; it is logged")
+            await response(scope, receive, send)
