@@ -10,7 +10,6 @@ from functools import wraps
 from typing import Any, TypeVar
 
 import typer
-from pydantic import ValidationError
 from typer.core import TyperGroup
 
 try:  # typer 0.29 carries its own click; earlier ones use click's
@@ -37,16 +36,18 @@ def input_errors(fn: F) -> F:
             return fn(*args, **kwargs)
         except InputError as exc:
             raise fail(str(exc)) from None
-        except ValidationError as exc:  # options built from flags: a value out of range names its field
-            e = exc.errors(include_url=False)[0]
-            where = ".".join(str(p) for p in e["loc"]) or exc.title
-            raise fail(f"{where}: {e['msg']}") from None
         except FileNotFoundError as exc:
             raise fail(f"no such file: {exc.filename}") from None
         except IsADirectoryError as exc:  # a rename names its target second
             raise fail(f"{exc.filename2 or exc.filename} is a directory, not a file") from None
         except UnicodeDecodeError as exc:
             raise fail(str(exc)) from None
+        except ValueError as exc:  # options built from flags: a value out of range names its field
+            from pydantic import ValidationError  # here, not at import: `tumblescan --help` stays fast
+
+            if not isinstance(exc, ValidationError):
+                raise
+            raise fail(first_error(exc)) from None
         except RecursionError:  # json gives up on input nested near 1000 levels deep
             raise fail("an input file's JSON nests too deeply to read") from None
         except OSError as exc:  # permission denied, a read-only or full disk: one line all the same
@@ -54,6 +55,13 @@ def input_errors(fn: F) -> F:
             raise fail(f"{where}: {exc.strerror or exc}" if where else str(exc)) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def first_error(exc: Any) -> str:
+    """The first error of a pydantic ``ValidationError`` as 'dotted.location: message'."""
+    e = exc.errors(include_url=False)[0]
+    where = ".".join(str(p) for p in e["loc"]) or exc.title
+    return f"{where}: {e['msg']}"
 
 
 class OneLineErrors(TyperGroup):
