@@ -37,7 +37,7 @@ class Recipe:
     """How to make a kind's input with the image's own CLI (command lines, split on spaces, that
     write into the directory ``{out}`` names) and which jobs to submit from it."""
 
-    simulate: str | tuple[str, ...]
+    simulate: tuple[str, ...]
     jobs: list[Job]
 
 
@@ -45,14 +45,14 @@ class Recipe:
 # the smoke test: add its recipe when registering it (small inputs: this runs in CI).
 RECIPES: dict[str, Recipe] = {
     "linescan-motion": Recipe(
-        simulate="tumblescan linescan-motion simulate --out {out} --lines 128 --pixels 128 --seed 3",
+        simulate=("tumblescan linescan-motion simulate --out {out} --lines 128 --pixels 128 --seed 3",),
         jobs=[
             Job("tracks", {"file": "tracks.json", "truth": "truth.json"}),
             Job("dense frames", {"file": "frames.ply", "truth": "truth.json"}),
         ],
     ),
     "panel-axis": Recipe(
-        simulate="tumblescan panel-axis simulate --out {out} --seed 3 --width-px 512 --height-px 384",
+        simulate=("tumblescan panel-axis simulate --out {out} --seed 3 --width-px 512 --height-px 384",),
         jobs=[Job("near range", {"meta": "meta.json", "image": "image.png"})],
     ),
     "marker-pose-graph": Recipe(
@@ -68,11 +68,11 @@ RECIPES: dict[str, Recipe] = {
         ],
     ),
     "spin-from-images": Recipe(
-        simulate="tumblescan spin-from-images simulate --out {out} --seed 3",
+        simulate=("tumblescan spin-from-images simulate --out {out} --seed 3",),
         jobs=[Job("image sequence", {"meta": "meta.json", "frames": "frames/*.png"})],
     ),
     "bearings": Recipe(
-        simulate="tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",
+        simulate=("tumblescan bearings simulate --out {out} --scene leo --targets 5 --clutter 0.2 --seed 3",),
         jobs=[
             Job("LEO (ECEF)", {"input": "input.json"}),
             Job("paper method", {"input": "input.json"}, {"method": "paper"}),
@@ -125,8 +125,7 @@ def main() -> int:
 
 def simulate(kind: str, recipe: Recipe, out: Path) -> bool:
     """Run the recipe's simulate command(s); False (the failure printed) if one fails."""
-    commands = (recipe.simulate,) if isinstance(recipe.simulate, str) else recipe.simulate
-    for command in commands:
+    for command in recipe.simulate:
         cmd = [arg.replace("{out}", str(out)) for arg in command.split()]
         sim = subprocess.run(cmd, capture_output=True, text=True)
         if sim.returncode != 0:
