@@ -105,21 +105,24 @@ def estimate_axis(
     # that axis, and when their own fit is orthogonal to it within σ, the short axis is fitted with
     # the axis held (orthogonal to it by construction). The Table 2 check is between that axis and the
     # short edges' own fit.
-    orthogonal = _orthogonal_families(families, axis_family, fit, set())
+    orthogonal = _orthogonal_families(families, axis_family, fit)
     if orthogonal:
-        fit = fit_panel_frame(fit, axis_planes, _planes(orthogonal)).axis
+        fit = fit_panel_frame(fit, axis_planes, orthogonal).axis
     separate = fit
     short = short_family(edges, axis_family, fit.direction)
-    short_fit = fit_direction([e.plane for e in short.edges], reject=True) if short is not None else None
     fit = with_edge_bias(fit, axis_planes, [e.line.half_length_px for e in axis_family.edges])
-    constrained = None
-    if short is not None and short_fit is not None and _orthogonal_within_sigma(separate, short_fit):
-        constrained = fit_about_axis(fit, short_fit, [e.plane for e in short.edges])
     # 6. Perspective SNR and the answer it allows.
     progress("axis", 0.8)
     a_img = axis_family.image_direction()
     snr = _perspective_snr(axis_family, a_img, camera)
     weak = snr < options.weak_snr
+    # In weak perspective every edge plane holds the line of sight: the panel block gives the short
+    # edges only, so their fits are not made.
+    short_fit, constrained = None, None
+    if short is not None and not weak:
+        short_fit = fit_direction([e.plane for e in short.edges], reject=True)
+        if _orthogonal_within_sigma(separate, short_fit):
+            constrained = fit_about_axis(fit, short_fit, [e.plane for e in short.edges])
     plane_normal = _axis_plane_normal(axis_family, a_img, camera)
     warnings = []
     if target.touches_border:
@@ -195,24 +198,20 @@ def _orthogonal_within_sigma(fit: DirectionFit, other: DirectionFit) -> bool:
 
 
 def _orthogonal_families(
-    families: list[Family], axis_family: Family, fit: DirectionFit, exclude: set[int]
-) -> list[tuple[DirectionFit, list[Edge]]]:
+    families: list[Family], axis_family: Family, fit: DirectionFit
+) -> list[tuple[DirectionFit, list[PlaneObs]]]:
     """Families of 3+ edges (two edges always fit a direction exactly, so a pair cannot show it is
-    a family), without the edges whose id is in ``exclude``, orthogonal to the axis within σ
-    (``_orthogonal_within_sigma``), each with its separate fit."""
+    a family) orthogonal to the axis within σ (``_orthogonal_within_sigma``), each with its
+    separate fit and its edges' planes."""
     out = []
     for fam in families:
-        kept = [e for e in fam.edges if id(e) not in exclude]
-        if fam is axis_family or len(kept) < 3:
+        if fam is axis_family or len(fam.edges) < 3:
             continue
-        f2 = fit_direction([e.plane for e in kept])
+        planes = [e.plane for e in fam.edges]
+        f2 = fit_direction(planes)
         if _orthogonal_within_sigma(fit, f2):
-            out.append((f2, kept))
+            out.append((f2, planes))
     return out
-
-
-def _planes(groups: list[tuple[DirectionFit, list[Edge]]]) -> list[tuple[DirectionFit, list[PlaneObs]]]:
-    return [(f, [e.plane for e in edges]) for f, edges in groups]
 
 
 def _perspective_snr(family: Family, a_img: FloatArray, camera: PinholeCamera) -> float:
