@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray
-from .rigid import Observations, RigidFit, fit_rigid, predict_lines
+from .rigid import Observations, RigidFit, fit_rigid, predict_lines, robust_scale_px
 
 MIN_TRACK_OBS = 3
 OUTLIER_SCALES = 5.0
@@ -23,11 +23,6 @@ REMATCH_MAX_PX = 2.0
 REMATCH_SCALES = 6.0
 REMATCH_MIN_PX = 0.5
 REMATCH_DEG = 3.0
-
-
-def robust_scale_px(residuals_px: FloatArray) -> float:
-    """1.4826 × the median absolute residual (px): the inliers' σ."""
-    return float(1.4826 * np.median(np.abs(residuals_px)))
 
 
 def subset(obs: Observations, keep: np.ndarray) -> Observations:

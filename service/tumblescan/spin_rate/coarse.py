@@ -7,13 +7,6 @@ import numpy as np
 from .._typing import FloatArray
 
 
-def lomb_scargle_rate(t_s: FloatArray, angle_rad: FloatArray, omegas: FloatArray) -> float | None:
-    """The rate (rad/s) at the periodogram's highest peak (see :func:`lomb_scargle_peaks`); None
-    under 4 samples."""
-    peaks = lomb_scargle_peaks(t_s, angle_rad, omegas, 1)
-    return peaks[0] if peaks else None
-
-
 def lomb_scargle_peaks(t_s: FloatArray, angle_rad: FloatArray, omegas: FloatArray, n_peaks: int = 3) -> list[float]:
     """The rates (rad/s) of the ``n_peaks`` highest local maxima of the periodogram of ``cos 2ψ``
     and ``sin 2ψ`` over ``omegas`` (ψ: the target's second-moment orientation, which repeats twice

@@ -59,8 +59,6 @@ class RigidFit:
     residuals_px: FloatArray
     weights: FloatArray
     sigma_omega_rad_s: float
-    sigma_omega_formal_rad_s: float
-    sigma_omega_jackknife_rad_s: float
     cov_axis_rad2: FloatArray
     rms_px: float
     success: bool
@@ -217,7 +215,7 @@ def fit_rigid(
                             method="lm", x_scale="jac", max_nfev=max_nfev)  # fmt: skip
         x0 = res.x
         r = model.residuals(x0)
-        scale = max(2.0 * 1.4826 * float(np.median(np.abs(r))), 0.05)
+        scale = cauchy_scale_px(r)
         w = 1.0 / (1.0 + (r / scale) ** 2)
     assert res is not None
     r = model.residuals(x0)
@@ -243,7 +241,6 @@ def fit_rigid(
     return RigidFit(
         omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
         weights=w, sigma_omega_rad_s=max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk),
-        sigma_omega_formal_rad_s=float(np.sqrt(max(H_inv[0, 0] * s2, 0.0))), sigma_omega_jackknife_rad_s=sigma_jk,
         cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
         rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
     )  # fmt: skip
@@ -284,6 +281,16 @@ def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_glo
         [np.linalg.pinv(S - Sj, rcond=1e-10, hermitian=True)[0] @ sj for Sj, sj in zip(S_parts, s_parts, strict=True)]
     )
     return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
+
+
+def robust_scale_px(residuals_px: FloatArray) -> float:
+    """1.4826 × the median absolute residual (px): the inliers' σ."""
+    return float(1.4826 * np.median(np.abs(residuals_px)))
+
+
+def cauchy_scale_px(residuals_px: FloatArray) -> float:
+    """The Cauchy loss's scale for these residuals: twice their robust σ, at least 0.05 px."""
+    return max(2.0 * robust_scale_px(residuals_px), 0.05)
 
 
 def cauchy_cost(r: FloatArray, scale: float) -> float:

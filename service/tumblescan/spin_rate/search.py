@@ -12,7 +12,16 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray, Progress
-from .rigid import Observations, RigidFit, cauchy_cost, fibonacci_sphere, fit_rigid, scan_cost
+from .rigid import (
+    Observations,
+    RigidFit,
+    cauchy_cost,
+    cauchy_scale_px,
+    fibonacci_sphere,
+    fit_rigid,
+    robust_scale_px,
+    scan_cost,
+)
 from .rotation import mirror_twin
 
 SCAN_AXES = 256
@@ -115,7 +124,7 @@ def common_costs(fits: list[RigidFit], radius: float | None = None, centre: Floa
     units of the range) and ``centre`` (its centre guess, depth 1), fits whose axis misses the
     target or whose median line lies over ``MAX_LINE_DISTANCE_RADII`` radii from the axis cost
     infinity, unless all do."""
-    scale = min(max(2.0 * 1.4826 * float(np.median(np.abs(f.residuals_px))), 0.05) for f in fits)
+    scale = min(cauchy_scale_px(f.residuals_px) for f in fits)
     cost = np.array([cauchy_cost(f.residuals_px, scale) for f in fits])
     if radius is not None and centre is not None:
         far = np.zeros(len(fits), dtype=bool)
@@ -169,5 +178,5 @@ def with_drift_if_needed(obs: Observations, fit: RigidFit, t_ref: float) -> Rigi
     ``DRIFT_DELTA_CHI2``; else ``fit``."""
     moving = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=True)
     cost = common_costs([fit, moving])
-    s2 = max(1.4826 * float(np.median(np.abs(moving.residuals_px))), 0.01) ** 2  # the larger model's, as in an F test
+    s2 = max(robust_scale_px(moving.residuals_px), 0.01) ** 2  # the larger model's, as in an F test
     return moving if 2.0 * (cost[0] - cost[1]) / s2 > DRIFT_DELTA_CHI2 else fit
