@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
+from tumblescan.linescan.dense.degeneracy import AXIS_LIMIT_DEG, RATE_LIMIT_DEG_S
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.target.shape import SatelliteShape
 from tumblescan.target.shapes import PARAMETRIC, MeshFileShape
@@ -34,7 +35,6 @@ from ..common import machine, out_dir, table
 from .dense import errors
 
 HUBBLE = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "hubble_illidroid.glb"
-RATE_LIMIT_DEG_S, AXIS_LIMIT_DEG = 0.05, 0.1
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
 
 
