@@ -77,6 +77,11 @@ def _add_ellipsoids(fig: Any, targets: list[dict[str, Any]], origin: np.ndarray)
         )
 
 
+def _origin(inp: BearingsInput) -> np.ndarray:
+    """The middle of the baseline: both 3D views' origin, so ECEF scenes stay readable."""
+    return 0.5 * (inp.stations[0].p_job_m + inp.stations[1].p_job_m)
+
+
 def _scene_layout(fig: Any, *, height: int) -> None:
     """True proportions, metres on every axis."""
     fig.update_layout(
@@ -89,8 +94,7 @@ def _scene_layout(fig: Any, *, height: int) -> None:
 def _figure(inp: BearingsInput, result: dict[str, Any]) -> str:
     import plotly.graph_objects as go
 
-    # Coordinates relative to the baseline's midpoint, so ECEF scenes stay readable.
-    origin = 0.5 * (inp.stations[0].p_job_m + inp.stations[1].p_job_m)
+    origin = _origin(inp)
     fig = go.Figure()
     st = np.array([s.p_job_m - origin for s in inp.stations])
     fig.add_trace(
@@ -177,7 +181,7 @@ def _close_up(inp: BearingsInput, result: dict[str, Any]) -> str:
     baseline, where a cluster of targets a kilometre away is a few pixels wide)."""
     import plotly.graph_objects as go
 
-    origin = 0.5 * (inp.stations[0].p_job_m + inp.stations[1].p_job_m)
+    origin = _origin(inp)
     by_track: dict[str, list[tuple[float, np.ndarray]]] = {}
     loose: list[np.ndarray] = []
     for fr in result["frames"]:
