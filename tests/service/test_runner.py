@@ -53,13 +53,21 @@ class FlakyStore(JobStore):
         self._maybe_down("fail")
         return super().fail(job_id, code, message, from_status=from_status, attempt=attempt)
 
+    def mark_cancelled(self, job_id: str, attempt: int | None = None) -> bool:
+        self._maybe_down("mark_cancelled")
+        return super().mark_cancelled(job_id, attempt)
+
+    def mark_artifacts_deleted(self, job_id: str) -> None:
+        self._maybe_down("mark_artifacts_deleted")
+        super().mark_artifacts_deleted(job_id)
+
 
 class CountingKind:
     """Reports progress a few times, then returns a result (or raises what it is given)."""
 
     name = "counting"
 
-    def __init__(self, error: Exception | None = None, meanwhile: Callable[[], None] | None = None) -> None:
+    def __init__(self, error: Exception | None = None, meanwhile: Callable[[], object] | None = None) -> None:
         self.error, self.meanwhile = error, meanwhile
 
     def run(self, ctx: JobContext) -> JobOutput:
@@ -127,3 +135,41 @@ def test_a_run_superseded_by_a_rerun_stops_without_touching_the_rerun_or_its_fil
     # The late run's writes are refused; the rerun's go through.
     assert not rt.store.succeed(job_id, {"late": True}, {}, attempt=1)
     assert rt.store.succeed(job_id, {"counted": 5}, {}, attempt=2)
+
+
+@pytest.mark.parametrize("down", ["mark_cancelled", "mark_artifacts_deleted"])
+def test_a_cancellation_during_an_outage_is_recorded_once_the_store_is_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, down: str
+) -> None:
+    kind = CountingKind()
+    rt, job_id = setup(tmp_path, monkeypatch, kind, **{down: 2})
+    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
+    assert runner.run_job(rt, job_id) == "cancelled"
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "cancelled"
+    assert not rt.artifacts.job_dir(job_id).exists()
+
+
+def test_a_cancellation_the_store_never_hears_of_leaves_the_job_to_the_reaper(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    kind = CountingKind()
+    rt, job_id = setup(tmp_path, monkeypatch, kind, mark_cancelled=1000)
+    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
+    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
+    assert runner.run_job(rt, job_id) is None  # not an OperationalError out of the worker
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "running"
+    assert rt.artifacts.path(job_id, "input-data.bin").read_bytes() == b"uploaded"
+
+
+def test_files_deleted_but_not_marked_so_still_end_the_job_cancelled(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    kind = CountingKind()
+    rt, job_id = setup(tmp_path, monkeypatch, kind, mark_artifacts_deleted=1000)
+    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
+    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
+    assert runner.run_job(rt, job_id) == "cancelled"
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "cancelled"

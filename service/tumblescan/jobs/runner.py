@@ -115,13 +115,7 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
     except JobTimeoutError as exc:
         return _failed(rt, job_id, attempt, "timeout", str(exc))
     except JobCancelledError:
-        if not _patiently(lambda: rt.store.mark_cancelled(job_id, attempt), f"cancelling job {job_id}"):
-            # Not cancelled but superseded: a rerun owns the job (and its files) now.
-            log.warning("job %s was taken over by a rerun; attempt %d stops", job_id, attempt)
-            return None
-        rt.artifacts.delete(job_id)
-        _patiently(lambda: rt.store.mark_artifacts_deleted(job_id), f"cancelling job {job_id}")
-        return "cancelled"
+        return _cancelled(rt, job_id, attempt)
     except InputError as exc:
         return _failed(rt, job_id, attempt, exc.code, str(exc))
     except OperationalError:
@@ -146,3 +140,20 @@ def _failed(rt: Runtime, job_id: str, attempt: int, code: str, message: str) -> 
     except OperationalError:
         log.exception("job %s left to the reaper: its failure could not be recorded", job_id)
     return None  # superseded, cancelled meanwhile, or the store stayed away: not this run's to set
+
+
+def _cancelled(rt: Runtime, job_id: str, attempt: int) -> str | None:
+    try:
+        if not _patiently(lambda: rt.store.mark_cancelled(job_id, attempt), f"cancelling job {job_id}"):
+            # Not cancelled but superseded: a rerun owns the job (and its files) now.
+            log.warning("job %s was taken over by a rerun; attempt %d stops", job_id, attempt)
+            return None
+    except OperationalError:
+        log.exception("job %s left to the reaper: its cancellation could not be recorded", job_id)
+        return None
+    rt.artifacts.delete(job_id)
+    try:
+        _patiently(lambda: rt.store.mark_artifacts_deleted(job_id), f"cancelling job {job_id}")
+    except OperationalError:  # the files are gone and the job is cancelled; only the flag is late
+        log.exception("job %s: its files are deleted but could not be marked so", job_id)
+    return "cancelled"
