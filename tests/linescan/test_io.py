@@ -246,7 +246,7 @@ GOOD_MOTION = {
 @pytest.mark.parametrize(
     ("content", "field", "says"),
     [
-        (b"\xff\xfe not json", "truth", "not JSON"),
+        (b"\xff\xfe not json", "truth", "not valid JSON"),
         (b"[1, 2]", "truth", "no 'motion'"),
         (json.dumps({"motion": {**GOOD_MOTION, "spin_axis": [0, 1]}}).encode(), "truth.motion.spin_axis", "3 finite"),
         (

@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from .._typing import FloatArray
+from ..io.json_text import parse_json
 from .errors import InvalidBearingsInputError, TooLargeError
 from .geometry import R_ecef_from_enu, Station, geodetic_to_ecef
 
@@ -136,12 +137,7 @@ def _known(obj: dict[str, Any], fields: frozenset[str], where: str) -> None:
 
 def load_json(data: bytes | str, *, field: str = "input") -> Any:
     """Parse JSON, keeping NaN/Infinity tokens for validation to name."""
-    try:
-        return json.loads(data, parse_constant=_NonFinite)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InvalidBearingsInputError(f"{field} is not valid JSON ({exc})", field=field) from None
-    except RecursionError:
-        raise InvalidBearingsInputError(f"{field}: the JSON nests too deeply to read", field=field) from None
+    return parse_json(data, field, error=InvalidBearingsInputError, parse_constant=_NonFinite)
 
 
 def read_input(path: Path, limits: Limits | None = None) -> BearingsInput:

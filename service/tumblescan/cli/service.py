@@ -207,10 +207,15 @@ def submit(
     """Submit a job of any kind to a running service; print the job, or with --wait its result."""
     from tumblescan_client import TumblescanError
 
+    from ..errors import InputError
+    from ..io.json_text import parse_json
+
     try:
-        opts = json.loads(options)
-    except json.JSONDecodeError as exc:
-        raise fail(f"--options is not valid JSON: {exc.msg}") from None
+        opts = parse_json(options, "--options")
+    except InputError as exc:
+        raise fail(str(exc)) from None
+    if not isinstance(opts, dict):
+        raise fail('--options must be a JSON object, {"name": value, ...}')
     _check_outputs(wait, timeout, out, artifacts)
     client = _client(url, api_key)
     try:

@@ -3,23 +3,18 @@ tag, no NaN or Infinity anywhere; every refusal an ``InputError`` naming the fie
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from .json_text import parse_json
 
 
 def manifest_object(data: bytes | str, schema: str, *, field: str = "meta") -> dict[str, Any]:
     """The parsed object of a manifest whose ``schema`` must be ``schema``."""
-    try:
-        raw = json.loads(data)
-        bad = first_non_finite(raw)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
-    except RecursionError:  # Python's parser (or the walk above) gives up near 1000 levels
-        raise InputError(f"{field}: the JSON nests too deeply to read", field=field) from None
+    raw = parse_json(data, field)
+    bad = first_non_finite(raw)
     if bad is not None:
         raise InputError(f"{bad}: not a finite number (NaN and Infinity are refused)", field=bad)
     if not isinstance(raw, dict):
@@ -37,12 +32,14 @@ def read_manifest(path: Path, *, field: str = "meta") -> bytes:
 
 
 def first_non_finite(value: Any, path: str = "") -> str | None:
-    """The dotted path of the first NaN/Infinity in a parsed JSON value, or None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return path or "meta"
-    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
-    for key, sub in items:
-        found = first_non_finite(sub, f"{path}.{key}" if path else str(key))
-        if found is not None:
-            return found
+    """The dotted path of the first NaN/Infinity in a parsed JSON value, or None. A walk with its
+    own stack: a document as deep as the parser allows must not overflow Python's."""
+    stack: list[tuple[Any, str]] = [(value, path)]
+    while stack:
+        node, where = stack.pop()
+        if isinstance(node, float) and not math.isfinite(node):
+            return where or "meta"
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        children = [(sub, f"{where}.{key}" if where else str(key)) for key, sub in items]
+        stack.extend(reversed(children))  # the first child is looked at first
     return None

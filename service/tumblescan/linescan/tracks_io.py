@@ -20,6 +20,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..errors import MalformedInputError, NonFiniteValueError, UnknownFieldError
+from ..io.json_text import parse_json
 from .sensor import SensorNoise
 from .tracks import Tracks
 
@@ -118,15 +119,8 @@ def write_tracks(path: str | os.PathLike[str], tracks: Tracks) -> None:
 
 
 def _decode(doc: str | bytes) -> Any:
-    try:
-        # NaN and Infinity literals parse to floats and are then rejected with their field.
-        return json.loads(doc)
-    except json.JSONDecodeError as exc:
-        raise MalformedInputError(
-            f"tracks are not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}", field="tracks"
-        ) from None
-    except RecursionError:  # Python's parser gives up near 1000 levels
-        raise MalformedInputError("tracks: the JSON nests too deeply to read", field="tracks") from None
+    # NaN and Infinity literals parse to floats and are then rejected with their field.
+    return parse_json(doc, "tracks", error=MalformedInputError)
 
 
 def _observation(i: int, o: Any, has_frame: bool) -> tuple[str, float, list[float], int | None]:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import MalformedInputError
+from ..io.json_text import parse_json
 from ..target.motion import Motion
 from .result import MotionResult
 
@@ -68,10 +68,7 @@ def errors_against(result: MotionResult, truth: Motion) -> dict[str, float]:
 def load_truth(path: Path) -> Motion:
     """The ``motion`` of a ``truth.json`` written by ``tumblescan simulate``; a file that is not
     one is refused naming what is wrong (not JSON, no ``motion``, or which of its fields)."""
-    try:
-        doc = json.loads(path.read_bytes())
-    except (ValueError, RecursionError):
-        raise MalformedInputError("'truth' is not JSON (a truth.json from simulate)", field="truth") from None
+    doc = parse_json(path.read_bytes(), "truth", error=MalformedInputError)
     motion = doc.get("motion") if isinstance(doc, dict) else None
     if not isinstance(motion, dict):
         raise MalformedInputError(

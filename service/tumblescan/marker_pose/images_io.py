@@ -22,6 +22,7 @@ import numpy as np
 
 from .._typing import Progress, no_progress
 from ..imaging.image_io import UnreadableImageError
+from ..io.json_text import parse_json
 from .errors import InputError, LimitExceededError, MalformedInputError
 from .markers_io import _load_json
 from .options import ImagePoseOptions, MarkerPoseLimits
@@ -100,12 +101,7 @@ def read_image_set(path: Path, limits: MarkerPoseLimits | None = None, field: st
         scene_doc = _load_json(path / SCENE, SCENE)
     else:
         names, scene_bytes = _zip_index(path, limits, field)
-        import json
-
-        try:
-            scene_doc = json.loads(scene_bytes)
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise MalformedInputError(f"{SCENE} is not valid JSON: {exc}", field=SCENE) from None
+        scene_doc = parse_json(scene_bytes, SCENE, error=MalformedInputError)
     scene = tags_from_json(scene_doc, limits=limits, require_detections=False)
     cam_index = {c.id: i for i, c in enumerate(scene.cameras)}
     frame_index = {int(f): i for i, f in enumerate(scene.frames)}

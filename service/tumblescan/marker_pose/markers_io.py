@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from .._typing import FloatArray, IntArray
+from ..io.json_text import parse_json
 from .errors import (
     DegenerateLayoutError,
     DuplicateMarkerIdError,
@@ -113,12 +113,7 @@ def read_markers(
 
 
 def _load_json(path: Path, name: str) -> Any:
-    try:
-        return json.loads(path.read_bytes())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise MalformedInputError(f"{name} is not valid JSON: {exc}", field=name) from None
-    except RecursionError:  # Python's parser gives up near 1000 levels
-        raise MalformedInputError(f"{name}: the JSON nests too deeply to read", field=name) from None
+    return parse_json(path.read_bytes(), name, error=MalformedInputError)
 
 
 def _csv_observations(text: str) -> list[dict[str, Any]]:

@@ -3,7 +3,6 @@ mirror twin when the view is ambiguous), then the numbers with their σ."""
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
@@ -12,6 +11,7 @@ import numpy as np
 from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..io.json_text import parse_json
 from ..report import image_html, page, table_html
 from .meta import PanelAxisInput
 from .segment import to_8bit
@@ -25,10 +25,7 @@ SHORT_BGR = (200, 120, 220)
 def load_truth(data: bytes | str, field: str = "truth") -> dict[str, Any]:
     """A simulation's truth.json as the report uses it: a JSON object whose ``axis_camera`` is
     3 finite numbers (a unit vector, camera frame); ``InputError`` naming the field otherwise."""
-    try:
-        doc = json.loads(data)
-    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
-        raise InputError(f"{field}: not valid JSON ({exc})", field=field) from None
+    doc = parse_json(data, field)
     if not isinstance(doc, dict):
         raise InputError(f"{field}: a JSON object (a simulation's truth.json) is expected", field=field)
     axis = doc.get("axis_camera")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -15,6 +14,7 @@ from starlette.background import BackgroundTask
 from starlette.datastructures import FormData
 
 from ...errors import MalformedInputError
+from ...io.json_text import parse_json
 from ...io.ply import read_ply
 from ...jobs.registry import get_kind
 from ...jobs.service import Upload
@@ -94,12 +94,7 @@ def _parse_upload(form: FormData) -> tuple[str, dict[str, Any], dict[str, list[U
         raise MalformedInputError("kind must be a text field, not a file", field="kind")
     if not isinstance(raw, str):
         raise MalformedInputError("options must be a text field holding a JSON object", field="options")
-    try:
-        options = json.loads(raw)
-    except json.JSONDecodeError as exc:
-        raise MalformedInputError(f"options is not valid JSON: {exc.msg}", field="options") from None
-    except RecursionError:
-        raise MalformedInputError("options nests too deeply to read", field="options") from None
+    options = parse_json(raw, "options", error=MalformedInputError)
     if not isinstance(options, dict):
         raise MalformedInputError("options must be a JSON object", field="options")
     files: dict[str, list[Upload]] = {}
