@@ -38,6 +38,23 @@ class JobArtifacts(_Model):
     def urls(self) -> dict[str, str]:
         return {k: v for k, v in self.model_dump().items() if isinstance(v, str)}
 
+    # Read like the dict of URLs it stands for (``keys``, ``items``, ``get``, ``in``); iterating
+    # stays pydantic's own, which ``dict(model)`` relies on.
+    def keys(self) -> list[str]:
+        return list(self.urls())
+
+    def items(self) -> list[tuple[str, str]]:
+        return list(self.urls().items())
+
+    def get(self, name: str, default: str | None = None) -> str | None:
+        return self.urls().get(name, default)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.urls()
+
+    def __len__(self) -> int:
+        return len(self.urls())
+
 
 class Job(_Model):
     id: str

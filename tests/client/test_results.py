@@ -47,3 +47,15 @@ def test_an_unknown_kind_gets_a_result_that_keeps_every_field() -> None:
     model = result_model("kind-of-the-future")
     assert model is UnknownResult
     assert model.model_validate({"x": [1, 2], "y": {"z": 3}}).model_dump() == {"x": [1, 2], "y": {"z": 3}}
+
+
+def test_job_artifacts_read_like_the_dict_of_urls_they_stand_for() -> None:
+    from tumblescan_client.models import JobArtifacts
+
+    a = JobArtifacts.model_validate({"cloud": None, "report": "/v1/jobs/j/report", "overlay": "/v1/jobs/j/a/overlay"})
+    assert sorted(a.keys()) == ["overlay", "report"]
+    assert dict(a.items()) == a.urls() and len(a) == 2
+    assert "overlay" in a and "cloud" not in a
+    assert a["report"] == "/v1/jobs/j/report" and a.get("cloud") is None and a.get("x", "-") == "-"
+    with pytest.raises(KeyError):
+        a["cloud"]
