@@ -87,6 +87,8 @@ def test_bad_archives_are_refused_naming_the_member(scene: tuple[Path, TagSimula
         ({"images/cam1/000042.png": small}, "malformed_input", "images/cam1/000042.png"),
         ({"../evil.png": small}, "malformed_input", "images"),
         ({"scene.json": None}, "malformed_input", "images"),
+        ({"scene.json": b"[" * 100_000 + b"]" * 100_000}, "malformed_input", "scene.json"),
+        ({"scene.json": b'{"cameras": '}, "malformed_input", "scene.json"),
     ]
     for i, (change, code, field) in enumerate(cases):
         bad = _rewrite(archive, tmp_path / f"bad{i}.zip", change)

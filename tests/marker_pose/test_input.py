@@ -15,30 +15,22 @@ from tumblescan.marker_pose.markers_io import markers_from_json, read_markers
 from tumblescan.marker_pose.options import MarkerPoseLimits
 from tumblescan.marker_pose.simulate import SimConfig, simulate
 
+from .edits import set_at
+
 BASE = simulate(SimConfig(frames=40), 0).document()
 
 
-def _set(path: list[Any], value: Any) -> Callable[[dict[str, Any]], object]:
-    def f(doc: dict[str, Any]) -> None:
-        target = doc
-        for p in path[:-1]:
-            target = target[p]
-        target[path[-1]] = value
-
-    return f
-
-
 CASES: list[tuple[str, Callable[[dict[str, Any]], object], str, str]] = [
-    ("length unit", _set(["units", "length"], "mm"), "unsupported_units", "units.length"),
-    ("time unit", _set(["units", "time"], "ms"), "unsupported_units", "units.time"),
-    ("NaN", _set(["observations", 3, "xyz"], [float("nan"), 0.0, 1.0]), "non_finite_value", "observations[3].xyz"),
+    ("length unit", set_at(["units", "length"], "mm"), "unsupported_units", "units.length"),
+    ("time unit", set_at(["units", "time"], "ms"), "unsupported_units", "units.time"),
+    ("NaN", set_at(["observations", 3, "xyz"], [float("nan"), 0.0, 1.0]), "non_finite_value", "observations[3].xyz"),
     (
         "duplicate",
         lambda d: d["observations"].insert(1, copy.deepcopy(d["observations"][0])),
         "duplicate_observation",
         "observations[1]",
     ),
-    ("time order", _set(["observations", 10, "t"], -1.0), "time_out_of_order", "observations[10].t"),
+    ("time order", set_at(["observations", 10, "t"], -1.0), "time_out_of_order", "observations[10].t"),
     (
         "two markers",
         lambda d: d["body"].__setitem__("markers", d["body"]["markers"][:2]),
@@ -57,15 +49,15 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], object], str, str]] = [
         "layout_scale",
         "body.markers",
     ),
-    ("duplicate id", _set(["body", "markers", 1, "id"], "M1"), "duplicate_marker_id", "body.markers[1].id"),
-    ("sigma zero", _set(["sensor", "point_sigma_m"], 0.0), "noise_out_of_range", "sensor.point_sigma_m"),
-    ("sigma large", _set(["sensor", "point_sigma_m"], 2.9), "noise_out_of_range", "sensor.point_sigma_m"),
-    ("far point", _set(["observations", 5, "xyz"], [410.0, -220.0, 1530.0]), "out_of_volume", "observations[5].xyz"),
+    ("duplicate id", set_at(["body", "markers", 1, "id"], "M1"), "duplicate_marker_id", "body.markers[1].id"),
+    ("sigma zero", set_at(["sensor", "point_sigma_m"], 0.0), "noise_out_of_range", "sensor.point_sigma_m"),
+    ("sigma large", set_at(["sensor", "point_sigma_m"], 2.9), "noise_out_of_range", "sensor.point_sigma_m"),
+    ("far point", set_at(["observations", 5, "xyz"], [410.0, -220.0, 1530.0]), "out_of_volume", "observations[5].xyz"),
     ("too little", lambda d: d.__setitem__("observations", d["observations"][:5]), "too_few_frames", "observations"),
-    ("unknown field", _set(["colour"], "red"), "unknown_field", "colour"),
-    ("format", _set(["format"], "other"), "malformed_input", "format"),
+    ("unknown field", set_at(["colour"], "red"), "unknown_field", "colour"),
+    ("format", set_at(["format"], "other"), "malformed_input", "format"),
     # Past int64 it once ended as an OverflowError traceback in the CLI.
-    ("frame past 2^53", _set(["observations", 2, "frame"], 10**30), "malformed_input", "observations[2].frame"),
+    ("frame past 2^53", set_at(["observations", 2, "frame"], 10**30), "malformed_input", "observations[2].frame"),
 ]
 
 

@@ -24,6 +24,8 @@ from tumblescan.marker_pose.tag_estimate import estimate_tag_poses
 from tumblescan.marker_pose.tag_simulate import TagSimConfig, paper_rig, simulate_tags
 from tumblescan.marker_pose.tags_io import tags_from_json
 
+from .edits import set_at
+
 
 @pytest.mark.parametrize(("motion", "seed"), [("paper", 0), ("tumble", 1)])
 def test_tag_poses_reach_the_tag_bound(motion: str, seed: int) -> None:
@@ -81,52 +83,42 @@ def test_projection_jacobian_matches_finite_differences() -> None:
 BASE = simulate_tags(TagSimConfig(frames=20), 0).document()
 
 
-def _set(path: list[Any], value: Any) -> Callable[[dict[str, Any]], None]:
-    def f(doc: dict[str, Any]) -> None:
-        target = doc
-        for p in path[:-1]:
-            target = target[p]
-        target[path[-1]] = value
-
-    return f
-
-
 CASES: list[tuple[str, Callable[[dict[str, Any]], None], str, str]] = [
-    ("units", _set(["units", "length"], "mm"), "unsupported_units", "units.length"),
+    ("units", set_at(["units", "length"], "mm"), "unsupported_units", "units.length"),
     (
         "NaN",
-        _set(["detections", 2, "corners_px", 1, 0], float("nan")),
+        set_at(["detections", 2, "corners_px", 1, 0], float("nan")),
         "non_finite_value",
         "detections[2].corners_px[1][0]",
     ),
-    ("K lower", _set(["cameras", 1, "K", 1, 0], 5.0), "invalid_camera", "cameras[1].K"),
-    ("K negative", _set(["cameras", 0, "K", 0, 0], -100.0), "invalid_camera", "cameras[0].K"),
-    ("not rigid", _set(["cameras", 2, "T_world_cam", 0, 0], 2.0), "invalid_camera", "cameras[2].T_world_cam"),
+    ("K lower", set_at(["cameras", 1, "K", 1, 0], 5.0), "invalid_camera", "cameras[1].K"),
+    ("K negative", set_at(["cameras", 0, "K", 0, 0], -100.0), "invalid_camera", "cameras[0].K"),
+    ("not rigid", set_at(["cameras", 2, "T_world_cam", 0, 0], 2.0), "invalid_camera", "cameras[2].T_world_cam"),
     (
         "corners 3",
-        _set(["detections", 4, "corners_px"], [[1, 2], [3, 4], [5, 6]]),
+        set_at(["detections", 4, "corners_px"], [[1, 2], [3, 4], [5, 6]]),
         "invalid_corners",
         "detections[4].corners_px",
     ),
     (
         "corner out",
-        _set(["detections", 4, "corners_px", 0], [5000.0, 10.0]),
+        set_at(["detections", 4, "corners_px", 0], [5000.0, 10.0]),
         "invalid_corners",
         "detections[4].corners_px",
     ),
-    ("family", _set(["tags", "family"], "tag99h1"), "unknown_family", "tags.family"),
-    ("size", _set(["tags", "size_m"], 0.0), "malformed_input", "tags.size_m"),
-    ("sigma", _set(["cameras", 0, "pixel_sigma"], 0.0), "noise_out_of_range", "cameras[0].pixel_sigma"),
-    ("camera", _set(["detections", 1, "camera"], "cam9"), "malformed_input", "detections[1].camera"),
+    ("family", set_at(["tags", "family"], "tag99h1"), "unknown_family", "tags.family"),
+    ("size", set_at(["tags", "size_m"], 0.0), "malformed_input", "tags.size_m"),
+    ("sigma", set_at(["cameras", 0, "pixel_sigma"], 0.0), "noise_out_of_range", "cameras[0].pixel_sigma"),
+    ("camera", set_at(["detections", 1, "camera"], "cam9"), "malformed_input", "detections[1].camera"),
     (
         "duplicate",
         lambda d: d["detections"].insert(1, copy.deepcopy(d["detections"][0])),
         "duplicate_observation",
         "detections[1]",
     ),
-    ("unknown field", _set(["cameras", 0, "fov"], 1.0), "unknown_field", "cameras[0].fov"),
+    ("unknown field", set_at(["cameras", 0, "fov"], 1.0), "unknown_field", "cameras[0].fov"),
     ("too few", lambda d: d.__setitem__("detections", d["detections"][:2]), "too_few_frames", "detections"),
-    ("frame past 2^53", _set(["detections", 3, "frame"], 2**63), "malformed_input", "detections[3].frame"),
+    ("frame past 2^53", set_at(["detections", 3, "frame"], 2**63), "malformed_input", "detections[3].frame"),
 ]
 
 

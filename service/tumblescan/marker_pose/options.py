@@ -7,20 +7,11 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 
-class MarkerPoseOptions(BaseModel):
-    """How to estimate. Level A (marker coordinates) uses all of these; levels B and C (tag corners,
-    images) will add their own fields beside them."""
+class _MotionPrior(BaseModel):
+    """The constant-velocity graph every level can put over its per-frame poses."""
 
     model_config = ConfigDict(extra="forbid")
 
-    method: Literal["graph", "paper"] = Field(
-        "graph",
-        description="graph: per-frame identification and Kabsch, refined by a GTSAM pose graph (ours); "
-        "paper: vector-cross poses chained frame to frame, then a pose graph (the paper's method, for benchmarks)",
-    )
-    body_frame: Literal["layout", "launch"] | None = Field(
-        None, description="frame of the reported body poses; default: the given layout's, else the launch frame"
-    )
     motion_prior: Literal["none", "constant_velocity"] = Field(
         "none", description="constant_velocity: white-noise-acceleration prior between frames (smooths, bridges gaps)"
     )
@@ -30,10 +21,23 @@ class MarkerPoseOptions(BaseModel):
     accel_psd: float | None = Field(
         None, gt=0, description="PSD of the white linear acceleration [m^2/s^3]; default: from the data"
     )
+    max_bridge_frames: int = Field(10, ge=0, le=10_000, description="longest gap the motion prior bridges [frames]")
+
+
+class MarkerPoseOptions(_MotionPrior):
+    """How to estimate from marker coordinates (level A)."""
+
+    method: Literal["graph", "paper"] = Field(
+        "graph",
+        description="graph: per-frame identification and Kabsch, refined by a GTSAM pose graph (ours); "
+        "paper: vector-cross poses chained frame to frame, then a pose graph (the paper's method, for benchmarks)",
+    )
+    body_frame: Literal["layout", "launch"] | None = Field(
+        None, description="frame of the reported body poses; default: the given layout's, else the launch frame"
+    )
     robust: Literal["none", "huber", "cauchy"] = Field("none", description="robust kernel on the graph's factors")
     robust_k: float = Field(3.0, gt=0, le=100, description="kernel width in sigmas")
     outlier_sigma: float = Field(5.0, ge=3.0, le=50.0, description="per-marker residual gate [sigmas]")
-    max_bridge_frames: int = Field(10, ge=0, le=10_000, description="longest gap the motion prior bridges [frames]")
     point_sigma_m: float | None = Field(
         None, description="1-sigma marker error per axis [m]; overrides the document's sensor.point_sigma_m"
     )
@@ -55,23 +59,11 @@ class MarkerPoseLimits(BaseModel):
     max_archive_bytes: int = Field(2_000_000_000, ge=1, description="size of an images zip [bytes]")
 
 
-class TagPoseOptions(BaseModel):
+class TagPoseOptions(_MotionPrior):
     """How to estimate from tag corners (level B): a joint Gauss-Newton fit of every camera's
     corners per frame, then the same constant-velocity graph as level A when asked for."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    motion_prior: Literal["none", "constant_velocity"] = Field(
-        "none", description="constant_velocity: white-noise-acceleration prior between frames (smooths, bridges gaps)"
-    )
-    angular_accel_psd: float | None = Field(
-        None, gt=0, description="PSD of the white angular acceleration [rad^2/s^3]; default: from the data"
-    )
-    accel_psd: float | None = Field(
-        None, gt=0, description="PSD of the white linear acceleration [m^2/s^3]; default: from the data"
-    )
     outlier_sigma: float = Field(5.0, ge=3.0, le=50.0, description="per-corner residual gate [sigmas]")
-    max_bridge_frames: int = Field(10, ge=0, le=10_000, description="longest gap the motion prior bridges [frames]")
     pixel_sigma_px: float | None = Field(
         None, gt=0, le=10, description="1-sigma corner error per image axis [px]; overrides every camera's pixel_sigma"
     )

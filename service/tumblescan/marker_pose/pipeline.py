@@ -11,9 +11,9 @@ from .estimate import estimate_poses
 from .markers_io import MarkerInput, read_markers
 from .options import ImagePoseOptions, MarkerPoseLimits, MarkerPoseOptions, TagPoseOptions
 from .result import MarkerPoseResult
-from .simulate import SimConfig, simulate
+from .simulate import SimConfig, Simulation, simulate
 from .tag_estimate import estimate_tag_poses
-from .tag_simulate import TagSimConfig, simulate_tags
+from .tag_simulate import TagSimConfig, TagSimulation, simulate_tags
 from .tags_io import FORMAT as TAGS_FORMAT
 from .tags_io import read_tags
 
@@ -65,25 +65,22 @@ def run(
 
 
 def write_simulation(out: Path, config: SimConfig, seed: int) -> tuple[Path, Path]:
-    """Simulate and write markers.json and truth.json into ``out``."""
-    sim = simulate(config, seed)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "markers.json").write_text(json.dumps(sim.document()))
-    truth = sim.truth()
-    truth["seed"] = seed
-    (out / "truth.json").write_text(json.dumps(truth))
-    return out / "markers.json", out / "truth.json"
+    """Simulate level A and write markers.json and truth.json into ``out``."""
+    return _write(out, "markers.json", simulate(config, seed), seed)
 
 
 def write_tag_simulation(out: Path, config: TagSimConfig, seed: int) -> tuple[Path, Path]:
     """Simulate level B and write tags.json and truth.json into ``out``."""
-    sim = simulate_tags(config, seed)
+    return _write(out, "tags.json", simulate_tags(config, seed), seed)
+
+
+def _write(out: Path, name: str, sim: Simulation | TagSimulation, seed: int) -> tuple[Path, Path]:
     out.mkdir(parents=True, exist_ok=True)
-    (out / "tags.json").write_text(json.dumps(sim.document()))
+    (out / name).write_text(json.dumps(sim.document()))
     truth = sim.truth()
     truth["seed"] = seed
     (out / "truth.json").write_text(json.dumps(truth))
-    return out / "tags.json", out / "truth.json"
+    return out / name, out / "truth.json"
 
 
 def run_images(

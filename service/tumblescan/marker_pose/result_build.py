@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._typing import FloatArray
+from .._typing import FloatArray, IntArray
 from .geometry import quat_wxyz, ypr_deg
 from .graph import GraphResult
 from .identify import CONFLICT, REJECTED, Association
@@ -45,29 +45,8 @@ def build_result(
     res = np.linalg.norm(data.xyz_m - pred, axis=1)
     ok = inl & np.isfinite(res)
     rms_frame = np.sqrt(np.bincount(k[ok], res[ok] ** 2, minlength=F) / np.maximum(np.bincount(k[ok], minlength=F), 1))
-    first = int(np.argmax(~np.isnan(graph.R[:, 0, 0])))
-    R0, t0 = graph.R[first], graph.t[first]
-    q = quat_wxyz(np.where(np.isnan(graph.R), np.eye(3), graph.R))
-    R_launch = np.einsum("ji,fjk->fik", R0, np.nan_to_num(graph.R))
-    t_launch = (np.nan_to_num(graph.t) - t0) @ R0
-    q_launch = quat_wxyz(np.where(np.isnan(graph.R), np.eye(3), R_launch))
-    ypr = ypr_deg(np.where(np.isnan(graph.R), np.eye(3), R_launch))
-    poses = []
-    for f in range(F):
-        have = not np.isnan(graph.R[f, 0, 0])
-        poses.append(
-            FramePose(
-                frame=int(data.frames[f]),
-                t=float(data.t_s[f]),
-                status=graph.status[f],
-                n_markers=int(n_markers[f]),
-                T_world_body=PoseValue(q_wxyz=q[f].tolist(), t_m=graph.t[f].tolist()) if have else None,
-                cov=graph.cov[f].tolist() if have and not np.isnan(graph.cov[f, 0, 0]) else None,
-                T_launch_body=PoseValue(q_wxyz=q_launch[f].tolist(), t_m=t_launch[f].tolist()) if have else None,
-                ypr_deg=ypr[f].tolist() if have else None,
-                residual_rms_m=float(rms_frame[f]) if n_markers[f] else None,
-            )
-        )
+    rms = np.where(n_markers > 0, rms_frame, np.nan)
+    poses = frame_poses(data.frames, data.t_s, graph.status, graph.R, graph.t, graph.cov, n_markers, rms_m=rms)
     per_marker = {
         ids[m]: float(np.sqrt(np.mean(res[ok & (assoc.obs_marker == m)] ** 2)))
         for m in range(len(ids))
@@ -113,6 +92,54 @@ def build_result(
         warnings=warnings,
         timing_s=timing,
     )
+
+
+def frame_poses(
+    frames: IntArray,
+    t_s: FloatArray,
+    status: list[str],
+    R_world_body: FloatArray,
+    t_world_m: FloatArray,
+    cov: FloatArray,
+    n_markers: IntArray,
+    *,
+    rms_m: FloatArray | None = None,
+    rms_px: FloatArray | None = None,
+    n_tags: IntArray | None = None,
+) -> list[FramePose]:
+    """One ``FramePose`` per frame: the pose in the world and in the launch frame (the body frame
+    at the first frame with a pose), its covariance, and the frame's residual RMS (NaN: none).
+
+    frames (F,) int, t_s (F,) [s], status (F,), R_world_body (F, 3, 3) and t_world_m (F, 3) with
+    NaN rows where a frame has no pose, cov (F, 6, 6), n_markers (F,) int; rms_m or rms_px (F,)
+    for levels A or B/C; n_tags (F,) int for levels B/C."""
+    have = ~np.isnan(R_world_body[:, 0, 0])
+    first = int(np.argmax(have))
+    R0, t0 = R_world_body[first], t_world_m[first]
+    Rs = np.where(have[:, None, None], R_world_body, np.eye(3))
+    R_launch = np.einsum("ji,fjk->fik", R0, Rs)
+    q, q_launch, ypr = quat_wxyz(Rs), quat_wxyz(R_launch), ypr_deg(R_launch)
+    t_launch = (np.nan_to_num(t_world_m) - t0) @ R0
+
+    def value(a: FloatArray | None, f: int) -> float | None:
+        return None if a is None or np.isnan(a[f]) else float(a[f])
+
+    return [
+        FramePose(
+            frame=int(frames[f]),
+            t=float(t_s[f]),
+            status=status[f],
+            n_markers=int(n_markers[f]),
+            T_world_body=PoseValue(q_wxyz=q[f].tolist(), t_m=t_world_m[f].tolist()) if have[f] else None,
+            cov=cov[f].tolist() if have[f] and not np.isnan(cov[f, 0, 0]) else None,
+            T_launch_body=PoseValue(q_wxyz=q_launch[f].tolist(), t_m=t_launch[f].tolist()) if have[f] else None,
+            ypr_deg=ypr[f].tolist() if have[f] else None,
+            residual_rms_m=value(rms_m, f),
+            n_tags=None if n_tags is None else int(n_tags[f]),
+            residual_rms_px=value(rms_px, f),
+        )
+        for f in range(len(frames))
+    ]
 
 
 def _nearest_residual(y: FloatArray, graph: GraphResult, f: int) -> float | None:

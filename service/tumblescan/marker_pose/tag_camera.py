@@ -124,6 +124,14 @@ def world_points(R_world_body: FloatArray, t_world_m: FloatArray, p_body_m: Floa
     return np.einsum("nij,npj->npi", R_world_body, p_body_m) + t_world_m[:, None]
 
 
+def body_to_pixels(
+    R_world_body: FloatArray, t_world_m: FloatArray, p_body_m: FloatArray, cam: IntArray, rig: RigArrays
+) -> FloatArray:
+    """Body points (N, P, 3) under per-row poses (N, 3, 3), (N, 3), seen by cameras ``cam`` (N,)
+    -> pixels (N, P, 2)."""
+    return project(to_camera(world_points(R_world_body, t_world_m, p_body_m), cam, rig), cam, rig)
+
+
 def projection_jacobian(
     R_world_body: FloatArray, t_world_m: FloatArray, p_body_m: FloatArray, cam: IntArray, rig: RigArrays
 ) -> tuple[FloatArray, FloatArray]:

@@ -14,22 +14,19 @@ import time
 import numpy as np
 
 from .._typing import FloatArray, Progress, no_progress
-from .geometry import quat_wxyz, ypr_deg
 from .graph import STATUS_MEASURED, STATUS_MISSING, auto_psd, motion_graph, typical_sigma
 from .options import TagPoseOptions
 from .result import (
     DetectionInfo,
-    FramePose,
     GraphInfo,
     LayoutInfo,
     LayoutMarker,
     MarkerPoseResult,
-    PoseValue,
     Rejection,
     Residuals,
     Segment,
 )
-from .result_build import MAX_REJECTIONS_LISTED
+from .result_build import MAX_REJECTIONS_LISTED, frame_poses
 from .tag_pose import FrameFit, fit_tag_poses
 from .tags_io import TagInput
 
@@ -150,28 +147,8 @@ def _result(
     res2 = np.sum(fit.residual_px**2, axis=-1)  # (N, 4)
     ok = fit.inlier & np.isfinite(res2).all(axis=1)
     rms_frame = np.sqrt(np.bincount(k[ok], res2[ok].sum(axis=1), minlength=F) / np.maximum(4 * n_tags, 1))
-    have = ~np.isnan(R[:, 0, 0])
-    first = int(np.argmax(have))
-    R0, t0 = R[first], t[first]
-    Rs = np.where(have[:, None, None], R, np.eye(3))
-    R_launch = np.einsum("ji,fjk->fik", R0, Rs)
-    q, q_launch, ypr = quat_wxyz(Rs), quat_wxyz(R_launch), ypr_deg(R_launch)
-    t_launch = (np.nan_to_num(t) - t0) @ R0
-    poses = [
-        FramePose(
-            frame=int(data.frames[f]),
-            t=float(data.t_s[f]),
-            status=status[f],
-            n_markers=4 * int(n_tags[f]),
-            n_tags=int(n_tags[f]),
-            T_world_body=PoseValue(q_wxyz=q[f].tolist(), t_m=t[f].tolist()) if have[f] else None,
-            cov=cov[f].tolist() if have[f] and not np.isnan(cov[f, 0, 0]) else None,
-            T_launch_body=PoseValue(q_wxyz=q_launch[f].tolist(), t_m=t_launch[f].tolist()) if have[f] else None,
-            ypr_deg=ypr[f].tolist() if have[f] else None,
-            residual_rms_px=float(rms_frame[f]) if n_tags[f] else None,
-        )
-        for f in range(F)
-    ]
+    rms_px = np.where(n_tags > 0, rms_frame, np.nan)
+    poses = frame_poses(data.frames, data.t_s, status, R, t, cov, 4 * n_tags, rms_px=rms_px, n_tags=n_tags)
     ids = [str(i) for i in data.tag_ids]
     per_tag = {
         ids[j]: float(np.sqrt(np.mean(res2[ok & (data.det_tag == j)])))

@@ -24,7 +24,7 @@ import numpy as np
 
 from .._typing import BoolArray, FloatArray, IntArray
 from .geometry import exp_so3
-from .tag_camera import RigArrays, project, projection_jacobian, to_camera
+from .tag_camera import RigArrays, body_to_pixels, project, projection_jacobian, to_camera
 from .tags_io import TagInput
 
 MAX_ITERATIONS = 30
@@ -105,8 +105,7 @@ def _rig(data: TagInput, sigma_px: FloatArray) -> RigArrays:
 
 def _residuals(R: FloatArray, t: FloatArray, corners_b: FloatArray, data: TagInput, rig: RigArrays) -> FloatArray:
     k = data.det_frame
-    pw = np.einsum("nij,npj->npi", R[k], corners_b) + t[k][:, None]
-    return np.asarray(data.corners_px - project(to_camera(pw, data.det_cam, rig), data.det_cam, rig))
+    return np.asarray(data.corners_px - body_to_pixels(R[k], t[k], corners_b, data.det_cam, rig))
 
 
 def gauss_newton(

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .._typing import FloatArray
-from .tag_camera import RigArrays, project, to_camera
+from .tag_camera import RigArrays, body_to_pixels
 from .tag_simulate import BOX_HALF_M, TagSimConfig, TagSimulation, simulate_tags, visible_tags
 
 IMAGE_BINNING = 2
@@ -111,9 +111,7 @@ def render_frame(sim: TagSimulation, k: int, c: int, rng: np.random.Generator) -
 
 
 def _pixels(R: FloatArray, t: FloatArray, p_body: FloatArray, c: int, rig: RigArrays) -> FloatArray:
-    pw = (p_body @ R.T + t)[None]
-    cam = np.array([c])
-    return np.asarray(project(to_camera(pw, cam, rig), cam, rig)[0])
+    return np.asarray(body_to_pixels(R[None], t[None], p_body[None], np.array([c]), rig)[0])
 
 
 def _tag_pixels(sim: TagSimulation, j: int, R: FloatArray, t: FloatArray, c: int, rig: RigArrays) -> FloatArray:

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from .._typing import FloatArray, IntArray
 from .geometry import exp_so3, quat_wxyz
 from .simulate import CAMERAS_M, CENTRE_M, motion
-from .tag_camera import RigArrays, RigCamera, pose_information_px, project, tag_corners_body, to_camera
+from .tag_camera import RigArrays, RigCamera, body_to_pixels, pose_information_px, project, tag_corners_body, to_camera
 
 PAPER_SENSOR_PX = 2048
 PAPER_FOCAL_PX = 12.5e-3 / 5.5e-6
@@ -269,5 +269,4 @@ def simulate_tags(config: TagSimConfig, seed: int) -> TagSimulation:
 def _exact_corners(
     R: FloatArray, t: FloatArray, corners: FloatArray, f: IntArray, c: IntArray, j: IntArray, rig: RigArrays
 ) -> FloatArray:
-    pw = np.einsum("nij,npj->npi", R[f], corners[j]) + t[f][:, None]
-    return project(to_camera(pw, c, rig), c, rig)
+    return body_to_pixels(R[f], t[f], corners[j], c, rig)
