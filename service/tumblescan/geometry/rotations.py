@@ -66,3 +66,13 @@ def rotation_matrix(axis: ArrayLike, angle_rad: ArrayLike) -> Array:
     R[..., 2, 1] = z * y * C + x * s
     R[..., 2, 2] = c + z * z * C
     return R
+
+
+def tangent_basis(a: Array) -> tuple[Array, Array]:
+    """Two unit vectors ``e1, e2`` (3,) orthogonal to the unit ``a`` (3,) and to each other, with
+    ``e2 = a × e1`` (a right-handed frame ``e1, e2, a``). ``e1`` is ``a`` crossed with whichever
+    coordinate axis is farther from it, so it is defined for every ``a``."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(a, helper)
+    e1 = e1 / np.linalg.norm(e1)
+    return e1, np.cross(a, e1)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray
+from ..geometry.rotations import tangent_basis
 from .edges import Edge, Family
 
 INNER_FRACTION = 0.15  # half-width of the middle of the span (the bus) as a fraction of the span
@@ -42,10 +43,7 @@ def short_family(edges: list[Edge], axis_family: Family, d: FloatArray) -> Famil
     ]
     if len(cand) < 2:
         return None
-    helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(d, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(d, e1)
+    e1, e2 = tangent_basis(d)
     psi, sig, keep = [], [], []
     for e in cand:
         c = np.cross(e.plane.normal, d)

@@ -8,12 +8,13 @@ corners are where the wing's two long edges (rails) meet its end edges.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._typing import FloatArray
+from ..geometry.rotations import tangent_basis
 from ..imaging.camera import PinholeCamera
 from ..imaging.lines import line_intersection
 from .edges import Edge, Family
@@ -50,41 +51,64 @@ class PoseCandidate:
     basis: FloatArray
 
 
-def wing_corners(family: Family, edges: list[Edge]) -> list[CornerSet]:
-    """Candidate corner sets of a wing (see ``CornerSet``), most likely first: the longest rails (a
-    wing's long edges) and their longest covered intervals first."""
+@dataclass(frozen=True)
+class _RailPair:
+    """Two rails (a wing's long edges, fitted lines ``line_a``, ``line_b``) and an interval of each
+    along the image axis ``a`` that overlap: the candidate long sides of one wing. ``cross``: the
+    edges across the axis, which close the corners; ``sigma`` the corner sigma [px]."""
+
+    a: FloatArray
+    line_a: FloatArray
+    line_b: FloatArray
+    ia: tuple[float, float]
+    ib: tuple[float, float]
+    cross: list[Edge]
+    sigma: float
+
+    def corner(self, on_b: bool, at: float) -> FloatArray:
+        return _corner(self.line_b if on_b else self.line_a, at, self.a, self.cross)
+
+
+def _rail_pairs(family: Family, edges: list[Edge]) -> Iterator[_RailPair]:
+    """The rail pairs of ``family``, most likely first: the longest rails and their longest
+    covered intervals first."""
     a = family.image_direction()
     b = np.array([-a[1], a[0]])
     rails = _rails(family.edges, b)
     rails.sort(key=lambda r: -sum(e.length_px for e in r))
-    span = _span(family.edges, a)
-    tol = 0.03 * span
+    tol = 0.03 * _span(family.edges, a)
     members = {id(e) for e in family.edges}
     cross = [e for e in edges if id(e) not in members and _angle_diff(e, a) > np.radians(20)]
-    out = []
     for ka, rail_a in enumerate(rails[:3]):
-        off_a = _offset(rail_a, b)
         for rail_b in rails[ka + 1 : 4]:
-            if abs(_offset(rail_b, b) - off_a) <= 3.0:
+            if abs(_offset(rail_b, b) - _offset(rail_a, b)) <= 3.0:
                 continue
             line_a, line_b = _rail_line(rail_a), _rail_line(rail_b)
-            sig = [e.line.sigma_px for e in rail_a + rail_b]
-            sigma = max(0.3, 2.0 * float(np.median(sig)))
+            sigma = max(0.3, 2.0 * float(np.median([e.line.sigma_px for e in rail_a + rail_b])))
             for ia in sorted(_merged(rail_a, a, tol), key=lambda iv: iv[0] - iv[1]):
                 for ib in sorted(_merged(rail_b, a, tol), key=lambda iv: iv[0] - iv[1]):
                     overlap = min(ib[1], ia[1]) - max(ib[0], ia[0])
                     if overlap < 0.5 * min(ia[1] - ia[0], ib[1] - ib[0]) or min(ia[1] - ia[0], ib[1] - ib[0]) < 10:
                         continue
-                    corners = np.array(
-                        [
-                            _corner(line_a, ia[0], a, cross),
-                            _corner(line_a, ia[1], a, cross),
-                            _corner(line_b, ib[1], a, cross),
-                            _corner(line_b, ib[0], a, cross),
-                        ]
-                    )
-                    out.append(CornerSet(corners, sigma))
-    return out
+                    yield _RailPair(a, line_a, line_b, ia, ib, cross, sigma)
+
+
+def wing_corners(family: Family, edges: list[Edge]) -> list[CornerSet]:
+    """Candidate corner sets of a wing (see ``CornerSet``), most likely first (``_rail_pairs``)."""
+    return [
+        CornerSet(
+            np.array(
+                [
+                    p.corner(False, p.ia[0]),
+                    p.corner(False, p.ia[1]),
+                    p.corner(True, p.ib[1]),
+                    p.corner(True, p.ib[0]),
+                ]
+            ),
+            p.sigma,
+        )
+        for p in _rail_pairs(family, edges)
+    ]
 
 
 def hidden_root_corners(
@@ -105,52 +129,36 @@ def hidden_root_corners(
     set is kept when the root is not short of the visible rail ends and, where it lies beyond them,
     the target (the bus) covers it, as it must if it is hidden. ``mask`` (H, W) bool: the target."""
     a = family.image_direction()
-    b = np.array([-a[1], a[0]])
-    rails = _rails(family.edges, b)
-    rails.sort(key=lambda r: -sum(e.length_px for e in r))
     ends = np.array([a @ p for e in family.edges for p in e.line.endpoints_px])
     mid = float(ends.min() + ends.max()) / 2  # the bus is between the wings
-    tol = 0.03 * float(np.ptp(ends))
-    members = {id(e) for e in family.edges}
-    cross = [e for e in edges if id(e) not in members and _angle_diff(e, a) > np.radians(20)]
     out = []
-    for ka, rail_a in enumerate(rails[:3]):
-        for rail_b in rails[ka + 1 : 4]:
-            if abs(_offset(rail_b, b) - _offset(rail_a, b)) <= 3.0:
-                continue
-            line_a, line_b = _rail_line(rail_a), _rail_line(rail_b)
-            sigma = max(0.3, 2.0 * float(np.median([e.line.sigma_px for e in rail_a + rail_b])))
-            for ia in sorted(_merged(rail_a, a, tol), key=lambda iv: iv[0] - iv[1]):
-                for ib in sorted(_merged(rail_b, a, tol), key=lambda iv: iv[0] - iv[1]):
-                    overlap = min(ib[1], ia[1]) - max(ib[0], ia[0])
-                    if overlap < 0.5 * min(ia[1] - ia[0], ib[1] - ib[0]) or min(ia[1] - ia[0], ib[1] - ib[0]) < 10:
-                        continue
-                    # Both tips on one side of the bus: the ends farther from the middle.
-                    side = np.sign((ia[0] + ia[1]) / 2 - mid)
-                    if side == 0 or side != np.sign((ib[0] + ib[1]) / 2 - mid):
-                        continue
-                    hi = side > 0
-                    tip_a = _corner(line_a, ia[1] if hi else ia[0], a, cross)
-                    tip_b = _corner(line_b, ib[1] if hi else ib[0], a, cross)
-                    toward_root = -side * a
+    for p in _rail_pairs(family, edges):
+        ia, ib = p.ia, p.ib
+        # Both tips on one side of the bus: the ends farther from the middle.
+        side = np.sign((ia[0] + ia[1]) / 2 - mid)
+        if side == 0 or side != np.sign((ib[0] + ib[1]) / 2 - mid):
+            continue
+        hi = side > 0
+        tip_a = p.corner(False, ia[1] if hi else ia[0])
+        tip_b = p.corner(True, ib[1] if hi else ib[0])
+        toward_root = -side * a
 
-                    def rebuild(c: FloatArray, hi: bool = hi, r: FloatArray = toward_root) -> FloatArray | None:
-                        ta, tb = (c[1], c[2]) if hi else (c[0], c[3])
-                        return _with_root(ta, tb, a, r, hi, length_m, width_m, px_per_m)
+        def rebuild(c: FloatArray, hi: bool = hi, r: FloatArray = toward_root) -> FloatArray | None:
+            ta, tb = (c[1], c[2]) if hi else (c[0], c[3])
+            return _with_root(ta, tb, a, r, hi, length_m, width_m, px_per_m)
 
-                    corners = _with_root(tip_a, tip_b, a, toward_root, hi, length_m, width_m, px_per_m)
-                    if corners is None:
-                        continue
-                    root_a, root_b = (corners[0], corners[3]) if hi else (corners[1], corners[2])
-                    seen_a = ia[0] if hi else ia[1]
-                    seen_b = ib[0] if hi else ib[1]
-                    length_px = float(np.linalg.norm(root_a - tip_a))
-                    if not all(
-                        _root_plausible(root, seen, a, side, mask, length_px)
-                        for root, seen in ((root_a, seen_a), (root_b, seen_b))
-                    ):
-                        continue
-                    out.append(CornerSet(corners, sigma, rebuild))
+        corners = _with_root(tip_a, tip_b, a, toward_root, hi, length_m, width_m, px_per_m)
+        if corners is None:
+            continue
+        root_a, root_b = (corners[0], corners[3]) if hi else (corners[1], corners[2])
+        seen_a = ia[0] if hi else ia[1]
+        seen_b = ib[0] if hi else ib[1]
+        length_px = float(np.linalg.norm(root_a - tip_a))
+        if not all(
+            _root_plausible(root, seen, a, side, mask, length_px) for root, seen in ((root_a, seen_a), (root_b, seen_b))
+        ):
+            continue
+        out.append(CornerSet(corners, p.sigma, rebuild))
     return out
 
 
@@ -255,7 +263,7 @@ def ippe_candidates(
                 samples[k].append(near[0] * np.sign(near[0] @ ax))
     out = []
     for k, (ax, nrm, cost, _) in enumerate(base):
-        basis = _basis(ax)
+        basis = np.vstack(tangent_basis(ax))
         dev = np.array([basis @ (s - ax) for s in samples[k]]) if samples[k] else np.zeros((0, 2))
         cov = np.cov(dev.T) if len(dev) > 2 else np.eye(2)
         out.append(PoseCandidate(ax, nrm, cost, np.atleast_2d(cov), basis))
@@ -282,13 +290,6 @@ def _solve(
         depth = float(np.ravel(tvecs[k])[2])
         out.append((np.asarray(R[:, 0], dtype=float), np.asarray(R[:, 2], dtype=float), cost, depth))
     return out
-
-
-def _basis(d: FloatArray) -> FloatArray:
-    helper = np.array([1.0, 0, 0]) if abs(d[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = np.cross(d, helper)
-    e1 /= np.linalg.norm(e1)
-    return np.vstack([e1, np.cross(d, e1)])
 
 
 def _offset(rail: list[Edge], b: FloatArray) -> float:
