@@ -9,7 +9,9 @@ of cases within the issue's limits (rate 0.05 deg/s and axes 0.1 deg), misses fl
 check failed, a warning called the estimate unreliable, or imprecise: a reported sigma over a
 third of a limit) and unflagged, cases within the limits but flagged, the share with
 every error within 3 reported sigma and any over 5, the share of points the fit used, time
-and peak memory; writes ``bench/out/real_shapes.json`` and a plot of error over sigma.
+and peak memory, and (box only: the bound needs plane faces) how many motions have a dense
+Cramer-Rao bound whose three times exceeds a limit, so that no estimator meets it reliably;
+writes ``bench/out/real_shapes.json`` and a plot of error over sigma.
 The Hubble mesh is read from ``../shared/meshes`` and skipped, saying why, when absent.
 """
 
@@ -33,6 +35,7 @@ from tumblescan.target.shapes import PARAMETRIC, MeshFileShape
 
 from ..common import machine, out_dir, table
 from .dense import errors
+from .dense_bound import dense_bound
 
 HUBBLE = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "hubble_illidroid.glb"
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
@@ -51,6 +54,10 @@ class Case:
     points_share: float
     seconds: float
     warnings: list[str]
+    # The box only: the dense Cramer-Rao bound (bench/linescan/dense_bound.py), and whether three
+    # times it exceeds a limit (no estimator could meet that limit reliably).
+    bound: dict[str, float] | None = None
+    below_bound: bool | None = None
 
 
 def shape_named(name: str) -> Any:
@@ -89,6 +96,13 @@ def one(name: str, distance_m: float, seed: int, size: int) -> Case:
         "",
     )
     sigmas = [e[f"{p}_sigma"] for p in PARAMS if np.isfinite(e[f"{p}_sigma"])]
+    bound, below = None, None
+    if isinstance(scene.shape, SatelliteShape):
+        bound = dense_bound(motion, scene, sim, result.reference_time_s)
+        below = bool(
+            3 * max(bound["spin_axis_deg"], bound["precession_axis_deg"]) > AXIS_LIMIT_DEG
+            or 3 * max(bound["spin_rate_deg_s"], bound["precession_rate_deg_s"]) > RATE_LIMIT_DEG_S
+        )
     return Case(
         shape=name,
         distance_m=distance_m,
@@ -101,6 +115,8 @@ def one(name: str, distance_m: float, seed: int, size: int) -> Case:
         points_share=(result.fit.points_used or 0) / result.fit.observations,
         seconds=seconds,
         warnings=result.warnings,
+        bound=bound,
+        below_bound=below,
     )
 
 
@@ -108,6 +124,7 @@ def summary(cases: list[Case]) -> list[object]:
     n = len(cases)
     misses = [c for c in cases if not c.within_limits]
     share = np.array([c.points_share for c in cases])
+    below = [c.below_bound for c in cases if c.below_bound is not None]
     return [
         cases[0].shape,
         f"{cases[0].distance_m:g}",
@@ -120,6 +137,7 @@ def summary(cases: list[Case]) -> list[object]:
         sum(c.worst_sigma > 5 and not c.flagged for c in cases),
         f"{100 * share.min():.0f}-{100 * share.max():.0f} %",
         f"{np.median([c.seconds for c in cases]):.1f} / {max(c.seconds for c in cases):.1f}",
+        f"{sum(below)}" if below else "-",
     ]
 
 
@@ -164,7 +182,8 @@ def main() -> None:
             rows.append(summary(group))
             print(f"  {name} at {distance:g} m done", flush=True)
     header = ["shape", "range m", "cases", "within limits", "misses flagged check/unrel./imprec.", "unflagged",
-              "all <= 3 sigma", "hits flagged", "> 5 sigma unflagged", "points used", "s median / max"]  # fmt: skip
+              "all <= 3 sigma", "hits flagged", "> 5 sigma unflagged", "points used", "s median / max",
+              "3x bound > limits"]  # fmt: skip
     print(table(rows, header))
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"peak memory of the whole run: {peak_gb:.2f} GB")

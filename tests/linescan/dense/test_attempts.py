@@ -3,7 +3,7 @@ fails the two-frame-count check, never because a frame had nothing to match."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -17,6 +17,7 @@ from tumblescan.linescan.validation import Similarity
 class FakeFit:
     scale: float
     frame_rms_m: np.ndarray
+    x: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0]))
 
 
 def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, int]]) -> list[str]:
@@ -30,7 +31,9 @@ def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, in
         made.append(start)
         scale, _, unmatched = outcomes[len(made) - 1]
         rms = np.r_[np.full(unmatched, np.nan), np.full(10 - unmatched, 0.02)]
-        return est._Solve(FakeFit(scale, rms), None, 10, path)  # type: ignore[arg-type]
+        # Each start ends at its own motion, tens of degrees from the others'.
+        x = np.array([0.3 + 0.5 * len(made), 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
+        return est._Solve(FakeFit(scale, rms, x), None, 10, path)  # type: ignore[arg-type]
 
     def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
         passed = outcomes[len(made) - 1][1]
@@ -72,24 +75,21 @@ def test_when_no_start_is_sound_the_least_flawed_is_kept_and_said(monkeypatch: p
     assert "no start was sound" in warnings[-1]
 
 
-def test_a_start_where_the_last_fit_ended_is_not_refined_again(monkeypatch: pytest.MonkeyPatch) -> None:
-    # The first motion fails the check; the consensus starts 0.6 deg from where it ended and
-    # would end there again, so only the swarm's start (29 deg off) is refined.
-    x = np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
-    begins = {"vote": x, "consensus": x + [0.01, 0, 0, 0, 0.01, 0, 0, 0, 0], "swarm": x + [0.5, 0, 0, 0, 0, 0, 0, 0, 0]}
-
-    def start_of(name: str) -> Any:
-        guess = est.InitialGuess(x=begins[name], x_spin_only=begins[name], cone_collapsed=False, passes=1)
-        return lambda *a: est.Start(guess=guess, inliers=np.ones(3, bool))
-
+def scripted_starts(
+    monkeypatch: pytest.MonkeyPatch, begins: dict[str, np.ndarray], ends: dict[str, np.ndarray], scales: list[float]
+) -> list[np.ndarray]:
+    """Starts at ``begins``; the n-th refined start ends at ``ends`` of its name with residual
+    scale ``scales[n]``, and only the second one refined passes the check."""
     for name, attr in (("vote", "vote"), ("consensus", "consensus_start"), ("swarm", "_swarm")):
-        monkeypatch.setattr(est, attr, start_of(name))
+        guess = est.InitialGuess(x=begins[name], x_spin_only=begins[name], cone_collapsed=False, passes=1)
+        monkeypatch.setattr(est, attr, lambda *a, g=guess: est.Start(guess=g, inliers=np.ones(3, bool)))
     refined: list[np.ndarray] = []
 
     def solve(setup: Any, pairs: Any, start: Any, warnings: list[str], *, path: str) -> Any:
+        name = next(k for k, v in begins.items() if v is start.guess.x)
+        fit = FakeFit(scales[len(refined)], np.full(10, 0.02), ends[name])
         refined.append(start.guess.x)
-        fit = type("Fit", (FakeFit,), {"x": start.guess.x})(1.0, np.full(10, 0.02))
-        return est._Solve(fit, start.guess, 10, path)
+        return est._Solve(fit, start.guess, 10, path)  # type: ignore[arg-type]
 
     def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
         passed = len(refined) == 2
@@ -97,7 +97,45 @@ def test_a_start_where_the_last_fit_ended_is_not_refined_again(monkeypatch: pyte
 
     monkeypatch.setattr(est, "_solve", solve)
     monkeypatch.setattr(est, "_judged", judged)
+    return refined
+
+
+X = np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
+NEAR = X + [0.01, 0, 0, 0, 0.01, 0, 0, 0, 0]  # 0.6 deg away: the same basin
+FAR = X + [0.5, 0, 0, 0, 0, 0, 0, 0, 0]  # 29 deg away
+
+
+def test_a_start_where_a_poor_fit_ended_is_not_refined_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The first motion fits poorly; the consensus starts 0.6 deg from where it ended and would
+    # end there again, so only the swarm's start (29 deg off) is refined.
+    begins = {"vote": X, "consensus": NEAR, "swarm": FAR}
+    refined = scripted_starts(monkeypatch, begins, begins, [8.0, 1.0])
     best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
-    assert len(refined) == 2 and np.array_equal(refined[1], begins["swarm"]) and attempts == 3
+    assert len(refined) == 2 and np.array_equal(refined[1], FAR) and attempts == 3
     assert best.solve.path == "registration+swarm+dense"
     assert "not refined again" in warnings[-1]
+
+
+def test_a_check_failure_two_starts_agree_on_ends_the_search(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The first motion fits the points but fails the check; the consensus starts where it ended:
+    # the swarm is not tried, and the failure is reported.
+    begins = {"vote": X, "consensus": NEAR, "swarm": FAR}
+    refined = scripted_starts(monkeypatch, begins, begins, [1.0, 1.0])
+    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert len(refined) == 1 and attempts == 2 and best.solve.path == "registration+cone+dense"
+    assert "no start was sound" in warnings[-1] and best.problem() == "the two-frame-count check failed"
+
+
+def test_a_second_start_that_ends_where_the_first_failed_ends_the_search(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The consensus starts far away yet ends where the vote's motion did, which failed the check.
+    refined = scripted_starts(
+        monkeypatch, {"vote": X, "consensus": FAR, "swarm": FAR + 0.3}, {"vote": X, "consensus": NEAR}, [1.0, 1.0]
+    )
+    monkeypatch.setattr(
+        est,
+        "_judged",
+        lambda s, solve, n2, w: est._Attempt(solve, solve.fit, Similarity(False, 9.0, 3.0, "covariance"), w),
+    )
+    _, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert len(refined) == 2 and attempts == 2
+    assert "ended where the motion above did" in warnings[-1]

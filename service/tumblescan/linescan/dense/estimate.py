@@ -214,7 +214,14 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
     best: _Attempt | None = None
     tried: list[str] = []
     made = 0
+    confirmed = False  # a second start led where a motion that failed the check only ended
     for begin, path in starts:
+        if confirmed:
+            # Two registration starts lead to one motion that fits the points: the failed check
+            # says the first frames alone do not pin it down (slow precession, mostly), not that
+            # the basin is wrong. Further starts after such a failure found a sound motion in none
+            # of 20 cases on the real-shapes bench (two runs of 72) and cost 10-40 s each.
+            break
         made += 1
         if tried:
             setup.progress("initializing", 0.05)
@@ -225,6 +232,7 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
                 # Refined, it would end where the last one did (and fail the same way): 10-40 s
                 # of registration and refinement for nothing.
                 tried.append(f"{path}: starts where the motion above ended, not refined again")
+                confirmed = _check_only(best)
                 continue
             solve = _solve(setup, global_pairs, start, attempt_warnings, path=path)
         except NoSurfacesError:
@@ -233,12 +241,14 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
             tried.append(f"{path}: {exc}")
             continue
         attempt = _judged(setup, solve, n2, attempt_warnings)
+        ended_alike = best is not None and same_basin(attempt.fit.x, best.fit.x)
+        confirmed = ended_alike and _check_only(attempt)
         if best is None or attempt.flaws() < best.flaws():
             best = attempt
         problem = attempt.problem()
         if problem is None:
             break
-        tried.append(f"{path}: {problem}")
+        tried.append(f"{path}: {problem}" + (" (it ended where the motion above did)" if ended_alike else ""))
     if best is None:
         raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
     kept = list(best.warnings)
@@ -246,6 +256,11 @@ def _best_attempt(setup: _Setup, global_pairs: PairTransforms, n2: int) -> tuple
         outcome = "no start was sound" if best.problem() else "the motion comes from " + best.solve.path
         kept.append(f"{len(tried)} start(s) tried before ({'; '.join(tried)}); {outcome}")
     return best, kept, made
+
+
+def _check_only(attempt: _Attempt | None) -> bool:
+    """Whether the attempt's motion fits the points and failed the check only."""
+    return attempt is not None and _poor_fit(attempt.fit) is None and attempt.problem() is not None
 
 
 def _judged(setup: _Setup, solve: _Solve, n2: int, warnings: list[str]) -> _Attempt:

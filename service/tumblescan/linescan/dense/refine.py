@@ -21,10 +21,9 @@ Three stages: every surfel matched in a neighbouring frame (right correspondence
 the initializer's rough start), then in random frames (the long time baselines fix the
 rates), then in every other frame from the converged start (each brings its own noise).
 
-Covariance: the sandwich ``H^-1 B H^-1`` with ``H = J^T W J`` and ``B = sum_c G_c G_c^T``,
-``G_c`` the summed gradient of the residuals whose source surfel lies in patch ``c`` of the
-target at ``T`` (cubes of extent / 10): residuals of one patch, from every frame, share pooled
-normals and the surface model's misfit (see :func:`_sandwich`).
+Covariance: a sandwich with the Cauchy cost's Hessian, clustered by patch of the target at
+``T`` (cubes of extent / 10: residuals of one patch, from every frame, share pooled normals
+and the surface model's misfit), by the cluster jackknife (see :mod:`.covariance`).
 """
 
 from __future__ import annotations
@@ -41,6 +40,7 @@ from ...target.motion import N_PARAMS, canonical_params
 from ..options import DenseConfig
 from ..sensor import SensorNoise
 from ..validation import canonical_cov
+from .covariance import patches, sandwich
 from .surfels import DenseData, LineMapping, Surfels, build_surfels, normal_variance
 
 ALL_FREE = tuple(range(N_PARAMS))
@@ -57,10 +57,7 @@ LM_FIRST_TIGHT = 1e-4
 LM_TIGHTEN = 10.0
 LM_RELAX = 3.0
 LM_TRIES = 10
-# Spin-only covariance: the centre's unobservable slide along the spin axis is removed by a
-# penalty this stiff (x trace H) before inverting.
-GAUGE_STIFFNESS = 1e6
-# Covariance clusters: patches of the target this share of its extent wide (see _sandwich).
+# Covariance clusters: patches of the target this share of its extent wide (see .covariance).
 CLUSTER_FRACTION = 1 / 10
 
 
@@ -413,9 +410,9 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps:
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
     lin = _linearize(data, mapping, surf, m, problem.noise)
-    w, scale = _weights(lin)
-    cluster = _patches(mapping.apply(surf.anchor_obs[m.src], surf.line[m.src]), CLUSTER_FRACTION * data.extent_m)
-    cov_free = _sandwich(lin.J, lin.r, w, cluster, _gauge_row(problem, x))
+    scale = _weights(lin)[1]
+    cluster = patches(mapping.apply(surf.anchor_obs[m.src], surf.line[m.src]), CLUSTER_FRACTION * data.extent_m)
+    cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * scale, cluster, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
@@ -441,32 +438,3 @@ def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps:
         iterations=steps,
         scale=scale,
     )
-
-
-def _patches(anchor_ref: FloatArray, size_m: float) -> IntArray:
-    """Cluster of each residual: the cube of side ``size_m`` (at ``T``) its source surfel lies in."""
-    key = np.floor(anchor_ref / size_m).astype(np.int64)
-    return np.asarray(np.unique(key, axis=0, return_inverse=True)[1].ravel(), dtype=np.int64)
-
-
-def _sandwich(
-    J: FloatArray, r: FloatArray, w: FloatArray, cluster: IntArray, gauge_row: FloatArray | None
-) -> FloatArray:
-    """``H^-1 B H^-1`` with ``H = J^T W J`` and ``B = sum_c G_c G_c^T``, ``G_c`` the summed gradients
-    ``g_i = w_i r_i J_i`` of the residuals of cluster ``c``: a patch of the target at ``T``
-    (:func:`_patches`), seen in every frame. Residuals of one patch share more than their
-    surfels' noise: the normals pooled over every frame's cells there, and the misfit of the
-    surface model (a cell on a curve or near an edge errs the same way in every frame).
-    Clustering by surfel (each residual in its source's and its target's cluster) left errors
-    of 3-4 reported sigmas on tubes, dishes and trusses."""
-    Jw = J * w[:, None]
-    H = J.T @ Jw
-    g = Jw * r[:, None]
-    G = np.zeros((int(cluster.max(initial=-1)) + 1, J.shape[1]))
-    np.add.at(G, cluster, g)
-    B = G.T @ G
-    if gauge_row is not None:
-        # The centre's slide along the spin axis is fixed (see _on_gauge): no variance there.
-        H = H + np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(H)
-    Hinv = np.linalg.pinv(H, rcond=1e-12)
-    return np.asarray(Hinv @ B @ Hinv, dtype=float)
