@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pytest
 
 from tumblescan import Motion, Scanner, Scene, Tracks, random_motion, simulate_tracks
+
+if TYPE_CHECKING:
+    from fastapi.testclient import TestClient
 
 
 def motion_for(seed: int, **kw: object) -> Motion:
@@ -22,3 +28,15 @@ def tracks_for(seed: int, *, noise: bool = True, **scene_kw: object) -> tuple[Mo
 def small_scanner() -> Scanner:
     """A coarse scanner (64 x 64) so dense-frame tests stay quick."""
     return Scanner(lines=64, pixels=64)
+
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    """The API in-process, without workers: enough for everything checked before a job runs."""
+    from fastapi.testclient import TestClient
+
+    from tumblescan.api.app import create_app
+    from tumblescan.settings import Settings
+
+    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("api") / "data"))) as c:
+        yield c

@@ -3,7 +3,6 @@ submitted, in one line with exit code 2."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -12,18 +11,14 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 import tumblescan_client
-from tumblescan.api.app import create_app
 from tumblescan.cli import app
-from tumblescan.settings import Settings
 
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
-    """The API in-process (no workers): enough for what submit checks before a job runs."""
-    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("submit") / "data"))) as c:
-        yield c
+@pytest.fixture
+def service(api: TestClient) -> TestClient:
+    return api
 
 
 @pytest.fixture
@@ -77,3 +72,18 @@ def test_a_service_url_without_a_scheme_is_one_line(tmp_path: Path) -> None:
     f.write_text("{}")
     one_error_line(runner.invoke(app, ["submit", str(f), "--url", "localhost:8000"]), "must start with http://")
     one_error_line(runner.invoke(app, ["report", "abc", "--url", "localhost:8000"]), "must start with http://")
+
+
+@pytest.mark.parametrize(
+    ("options", "words"),
+    [
+        ("[" * 100_000 + "]" * 100_000, "--options: the JSON nests too deeply"),
+        ("{x", "--options: not valid JSON"),
+        ("[1]", "--options must be a JSON object"),
+    ],
+)
+def test_options_that_are_not_a_json_object_are_one_line(tmp_path: Path, options: str, words: str) -> None:
+    f = tmp_path / "input.json"
+    f.write_text("{}")
+    r = submit("--kind", "bearings", "--options", options, f"input={f}")
+    assert r.exit_code == 2 and r.output.count("\n") == 1 and words in r.output, r.output

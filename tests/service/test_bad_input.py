@@ -4,7 +4,6 @@ a 500. In-process (FastAPI's TestClient, no workers): every check here happens a
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -12,20 +11,16 @@ from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 from tumblescan.api import errors
-from tumblescan.api.app import create_app
 from tumblescan.errors import MalformedInputError
 from tumblescan.jobs.kind import Submission
 from tumblescan.jobs.service import _accept
-from tumblescan.settings import Settings
 
 DEEP = "[" * 100_000 + "]" * 100_000  # past Python's JSON recursion limit
 
 
-@pytest.fixture(scope="module")
-def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
-    settings = Settings(data_dir=tmp_path_factory.mktemp("bad") / "data")
-    with TestClient(create_app(settings)) as c:
-        yield c
+@pytest.fixture
+def client(api: TestClient) -> TestClient:
+    return api
 
 
 def detail(r: Any, status: int = 422) -> dict[str, Any]:
