@@ -31,6 +31,11 @@ PLANE_AXIS_STEP_DEG = 6.0
 PLANE_TILTS_DEG = (-8.0, 0.0, 8.0)
 RATE_FACTORS = (0.5, 2.0 / 3.0, 1.5, 2.0)
 SHORT_NFEV = 25
+# Short fits carried to convergence; a fit within SAME_RATE_REL and SAME_AXIS_DEG of a better one
+# is the same basin and not carried again.
+FINALISTS = 3
+SAME_RATE_REL = 0.01
+SAME_AXIS_DEG = 3.0
 # A fit whose lines lie mostly farther from the centre than the target's size is implausible: a
 # slow rate with the lines far away mimics the image motion of a fast one near the centre.
 MAX_LINE_DISTANCE_RADII = 2.0
@@ -153,7 +158,8 @@ def best_of_starts(
 ) -> RigidFit:  # fmt: skip
     """Short fits from every start and from each one's weak-perspective twin; then from the leader
     at ``RATE_FACTORS`` times its rate (inside ``[w_lo, w_hi]``), each with the best axis of the
-    scan at that rate. The lowest common-scale cost wins and is carried to convergence."""
+    scan at that rate. The ``FINALISTS`` best distinct short fits (common-scale cost) are carried to
+    convergence, then the best one's weak-perspective twin, and the lowest converged cost wins."""
     trials = [fit_rigid(obs, w0, a0, cc, t_ref, max_nfev=SHORT_NFEV, passes=1) for w0, a0, cc in starts]
     trials += [
         fit_rigid(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref, max_nfev=SHORT_NFEV, passes=1) for f in trials
@@ -168,8 +174,28 @@ def best_of_starts(
         C = scan_cost(scan_obs, np.array([w]), axes, lead.c0, t_ref, radius, clip_px=SCAN_CLIP_PX)[0]
         for a0 in (lead.axis, axes[int(np.argmin(C))]):
             trials.append(fit_rigid(obs, w, a0, lead.c0, t_ref, max_nfev=SHORT_NFEV, passes=1))
-    best = trials[int(np.argmin(common_costs(trials, radius, centre)))]
-    return fit_rigid(obs, best.omega_rad_s, best.axis, best.c0, t_ref)
+    # A short fit ranks basins only roughly (the one nearer its minimum after SHORT_NFEV steps looks
+    # better): the best few distinct ones are carried to convergence and compared again.
+    order = np.argsort(common_costs(trials, radius, centre))
+    finalists: list[RigidFit] = []
+    for k in order:
+        if len(finalists) == FINALISTS:
+            break
+        if all(not _same_basin(trials[k], f) for f in finalists):
+            finalists.append(trials[k])
+    done = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref) for f in finalists]
+    best = done[int(np.argmin(common_costs(done, radius, centre)))]
+    # The winner's weak-perspective twin, started from the converged rate: a short fit's twin was
+    # taken from a rate and axis still far off, and so may have missed the twin basin.
+    done.append(fit_rigid(obs, best.omega_rad_s, mirror_twin(best.axis), best.c0, t_ref))
+    return done[int(np.argmin(common_costs(done, radius, centre)))]
+
+
+def _same_basin(a: RigidFit, b: RigidFit) -> bool:
+    """Whether two fits sit in one basin: rates within ``SAME_RATE_REL`` and axes (with sense)
+    within ``SAME_AXIS_DEG``."""
+    same_rate = abs(a.omega_rad_s - b.omega_rad_s) <= SAME_RATE_REL * max(a.omega_rad_s, b.omega_rad_s)
+    return same_rate and float(a.axis @ b.axis) >= np.cos(np.radians(SAME_AXIS_DEG))
 
 
 def with_drift_if_needed(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
