@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry.rotations import tangent_basis
 from ..io.ply import TimedCloud
 from ..report import figure_html, page, value_text
 from ..target.motion import Motion
@@ -234,10 +235,7 @@ def _cone(center: NDArray[np.float64], axis: NDArray[np.float64], half_angle: fl
     """The precession cone swept by the spin axis, apex at the centre (both nappes)."""
     import plotly.graph_objects as go
 
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(axis, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
+    e1, e2 = tangent_basis(axis)
     phi = np.linspace(0, 2 * np.pi, 48, endpoint=False)
     ring = np.cos(half_angle) * axis[None, :] + np.sin(half_angle) * (
         np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag
 from .._open3d import load_open3d
 from .._typing import FloatArray
 from ..errors import MalformedInputError
+from ..geometry.rotations import tangent_basis
 from .shape import SatelliteShape
 
 if TYPE_CHECKING:
@@ -103,10 +104,8 @@ class _Parts:
 def _rotation_z_to(axis: FloatArray) -> FloatArray:
     """A rotation taking ``+z`` to ``axis`` (columns: two perpendicular unit vectors and the axis)."""
     a = axis / np.linalg.norm(axis)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(helper, a)
-    e1 /= np.linalg.norm(e1)
-    return np.column_stack([e1, np.cross(a, e1), a])
+    e1, e2 = tangent_basis(a)
+    return np.column_stack([-e1, -e2, a])  # the sense the library's meshes were built with
 
 
 def _bus(bus_m: tuple[float, float, float]) -> tuple[_Parts, tuple[float, float, float]]:
