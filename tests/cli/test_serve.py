@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import socket
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from tumblescan.cli import app
@@ -30,3 +32,19 @@ def test_a_port_in_use_is_one_line_before_anything_starts(tmp_path: Path) -> Non
         r = runner.invoke(app, ["serve", "--port", str(port), "--no-workers", "--data-dir", str(tmp_path)])
     assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
     assert f"cannot listen on 127.0.0.1:{port}" in r.output and "in use" in r.output
+
+
+def test_each_worker_gets_its_share_of_the_cores_unless_the_environment_says(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from tumblescan.cli.service import THREAD_POOL_VARS, share_cores
+
+    for var in THREAD_POOL_VARS:
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr("os.cpu_count", lambda: 8)
+    share_cores(3)
+    assert [os.environ[v] for v in THREAD_POOL_VARS] == ["2", "2", "2"]
+    monkeypatch.setenv("OMP_NUM_THREADS", "5")
+    monkeypatch.delenv("MKL_NUM_THREADS")
+    share_cores(16)  # more workers than cores: one thread each, a user's own setting kept
+    assert [os.environ[v] for v in THREAD_POOL_VARS] == ["5", "2", "1"]

@@ -27,16 +27,14 @@ log = logging.getLogger("tumblescan.api")
 
 
 def worker_env(settings: Settings) -> dict[str, str]:
-    """Environment for worker processes: the same settings, one BLAS/OpenMP thread each."""
+    """Environment for worker processes: the same settings (the worker command sizes their
+    BLAS/OpenMP thread pools)."""
     env = dict(os.environ)
     env.update(
         {
             "TUMBLESCAN_DATA_DIR": str(settings.data_dir.resolve()),
             "TUMBLESCAN_ARTIFACT_DIR": str(settings.artifacts.resolve()),
             "TUMBLESCAN_DATABASE_URL": settings.db_url,
-            "OPENBLAS_NUM_THREADS": "1",
-            "OMP_NUM_THREADS": "1",
-            "MKL_NUM_THREADS": "1",
         }
     )
     env["TUMBLESCAN_QUEUE_NAME"] = settings.queue_name
