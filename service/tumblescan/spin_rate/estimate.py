@@ -18,7 +18,7 @@ from .options import EstimateOptions
 from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackObs
 from .rigid import Observations, RigidFit, fit_rigid
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
-from .search import best_of_starts, los_start, scan_starts, with_drift_if_needed
+from .search import best_of_starts_without_strays, los_start, scan_starts, with_drift_if_needed
 
 MIN_TRACK_FRAMES = 3
 LONG_TRACK_FRAMES = 6
@@ -108,15 +108,9 @@ def estimate_spin(
         starts.append(on_los)
     clock["scan"] = time.perf_counter()
     # 6. Short rigid fits from each start (and their twins, and the leader at simple multiples of
-    # its rate), the best carried on; re-match every frame's segments to its lines and refit.
-    fit = best_of_starts(obs, starts, t[0], w_lo, w_hi, c0, radius)
-    # Tracks that follow no rigid line (px off all along) pull every fit, the wrong basins' least
-    # (measured: two 16-frame tracks 15-25 px off the true motion made a fit 3.9 % off the cheaper):
-    # without them the starts are compared again.
-    kept, _ = drop_stray_tracks(obs, fit, t[0], refit=False)
-    if kept is not obs:
-        obs = kept
-        fit = best_of_starts(obs, starts, t[0], w_lo, w_hi, c0, radius)
+    # its rate), the best carried on, and again without tracks that follow no rigid line; peel the
+    # outliers; re-match every frame's segments to its lines and refit.
+    obs, fit = best_of_starts_without_strays(obs, starts, t[0], w_lo, w_hi, c0, radius)
     obs, fit = reject_outliers(obs, fit, t[0])
     fit = with_drift_if_needed(obs, fit, t[0])
     progress("fit", 0.85)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray, Progress
+from .association import drop_stray_tracks
 from .rigid import (
     Observations,
     RigidFit,
@@ -224,6 +225,21 @@ def best_of_starts(
     # taken from a rate and axis still far off, and so may have missed the twin basin.
     done.append(fit_rigid(obs, best.omega_rad_s, mirror_twin(best.axis), best.c0, t_ref))
     return done[int(np.argmin(common_costs(done, radius, centre)))]
+
+
+def best_of_starts_without_strays(
+    obs: Observations, starts: list[Start], t_ref: float, w_lo: float, w_hi: float, centre: FloatArray,
+    radius: float,
+) -> tuple[Observations, RigidFit]:  # fmt: skip
+    """``best_of_starts``; then, when its winner finds tracks that follow no rigid line (px off all
+    along, ``association.drop_stray_tracks``), the starts compared again without them. Such tracks
+    pull every fit, a wrong basin's least (measured: two 16-frame tracks 15-25 px off the true
+    motion made a fit 3.9 % off the cheaper). Returns the observations kept and their fit."""
+    fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius)
+    kept, _ = drop_stray_tracks(obs, fit, t_ref, refit=False)
+    if kept is obs:
+        return obs, fit
+    return kept, best_of_starts(kept, starts, t_ref, w_lo, w_hi, centre, radius)
 
 
 def _same_basin(a: RigidFit, b: RigidFit) -> bool:
