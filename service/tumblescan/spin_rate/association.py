@@ -18,7 +18,10 @@ from .rigid import Observations, RigidFit, fit_rigid, predict_lines, robust_scal
 MIN_TRACK_OBS = 3
 OUTLIER_SCALES = 5.0
 OUTLIER_MIN_PX = 0.3
-OUTLIER_ROUNDS = 3
+OUTLIER_PEELS = 8
+PEEL_NFEV = 25
+STRAY_MIN_PX = 1.0
+STRAY_FACTOR = 3.0
 REMATCH_MAX_PX = 2.0
 REMATCH_SCALES = 6.0
 REMATCH_MIN_PX = 0.5
@@ -32,20 +35,49 @@ def subset(obs: Observations, keep: np.ndarray) -> Observations:
 
 
 def reject_outliers(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Observations, RigidFit]:
-    """Drop every observation whose larger end-point residual exceeds
-    ``max(OUTLIER_MIN_PX, OUTLIER_SCALES × robust scale)`` and tracks left with under
-    ``MIN_TRACK_OBS`` observations, refit from ``fit``, and repeat (at most ``OUTLIER_ROUNDS``
-    times, and never below 2 tracks). Returns the kept observations and their fit."""
-    for _ in range(OUTLIER_ROUNDS):
+    """Peel outliers worst first: the track holding the worst observation loses its observations
+    whose larger end-point residual exceeds ``max(OUTLIER_MIN_PX, OUTLIER_SCALES × robust scale)``
+    (the whole track when under ``MIN_TRACK_OBS`` remain), the fit is repeated, and so on, at most
+    ``OUTLIER_PEELS`` times and never below 2 tracks. Dropping every such observation at once lets
+    one switched track, which pulls the rate and so the residuals of good tracks, take good
+    observations with it. Returns the kept observations and their fit."""
+    peeled = False
+    for _ in range(OUTLIER_PEELS):
         r = np.abs(fit.residuals_px.reshape(-1, 2)).max(axis=1)
-        keep = r <= max(OUTLIER_MIN_PX, OUTLIER_SCALES * robust_scale_px(fit.residuals_px))
+        bad = r > max(OUTLIER_MIN_PX, OUTLIER_SCALES * robust_scale_px(fit.residuals_px))
+        if not bad.any():
+            break
+        keep = ~(bad & (obs.track == obs.track[int(np.argmax(r))]))
         counts = np.bincount(obs.track[keep], minlength=obs.n_tracks)
         keep &= counts[obs.track] >= MIN_TRACK_OBS
-        if keep.all() or len(np.unique(obs.track[keep])) < 2:
+        if len(np.unique(obs.track[keep])) < 2:
             break
         obs = subset(obs, keep)
+        fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift, max_nfev=PEEL_NFEV, passes=1)
+        peeled = True
+    if peeled:  # the short refits of the peeling only rank residuals; the kept tracks get a full fit
         fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
     return obs, fit
+
+
+def drop_stray_tracks(
+    obs: Observations, fit: RigidFit, t_ref: float, refit: bool = True
+) -> tuple[Observations, RigidFit]:
+    """Drop the tracks whose median larger end-point residual exceeds
+    ``max(STRAY_MIN_PX, STRAY_FACTOR × the median track's)`` and refit (not below 2 tracks).
+    A track that follows no rigid line (a shadow's edge, a track that switched edges for good) is
+    off along its whole length, so the per-observation peeling, relative to a scale it inflates
+    itself, can leave it in. Without ``refit`` the fit returned is ``fit`` (of the old tracks);
+    ``obs`` itself is returned when nothing is dropped."""
+    r = np.abs(fit.residuals_px.reshape(-1, 2)).max(axis=1)
+    per_track = np.array([np.median(r[obs.track == j]) for j in range(obs.n_tracks)])
+    stray = per_track > max(STRAY_MIN_PX, STRAY_FACTOR * float(np.median(per_track)))
+    if not stray.any() or int((~stray).sum()) < 2:
+        return obs, fit
+    obs = subset(obs, ~stray[obs.track])
+    if not refit:
+        return obs, fit
+    return obs, fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
 def rematch(
