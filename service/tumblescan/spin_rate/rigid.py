@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._typing import FloatArray, IntArray
-from .rotation import rot, tangent_basis
+from ..geometry.rotations import tangent_basis
+from .rotation import rot
 
 
 @dataclass(frozen=True)

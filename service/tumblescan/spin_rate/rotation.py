@@ -21,14 +21,6 @@ def unit_from_angles(theta: float, phi: float) -> FloatArray:
     return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
 
 
-def tangent_basis(a: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Two unit vectors orthogonal to ``a`` and to each other."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(a, helper)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(a, e1)
-
-
 def mirror_twin(a: FloatArray) -> FloatArray:
     """The weak-perspective (Necker) twin ``(-a_x, -a_y, a_z)``."""
     return np.array([-a[0], -a[1], a[2]])

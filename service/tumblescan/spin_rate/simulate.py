@@ -20,13 +20,14 @@ from typing import Any, Literal
 import numpy as np
 
 from .._typing import FloatArray
+from ..geometry.rotations import tangent_basis
 from ..imaging.blur import render_exposure
 from ..imaging.camera import PinholeCamera, camera_from_fov
 from ..imaging.image_io import write_image
 from ..imaging.sensor import SensorModel, expose
 from .bound import rate_crb
 from .meta import INPUT_SCHEMA
-from .rotation import los_angle_deg, mirror_twin, rot, tangent_basis, unit_from_angles
+from .rotation import los_angle_deg, mirror_twin, rot, unit_from_angles
 from .spacecraft import Target, random_target
 
 SimKind = Literal["oblique", "los", "plane", "static", "aliased", "blank", "corrupt", "broken-meta"]
