@@ -97,7 +97,13 @@ def inside_face(
         mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
         kink_ok = np.einsum("ni,ni->n", normal_obs, mean) > np.cos(CURVED_MAX_KINK)
         smooth &= kink_ok | silent[:, a] | silent[:, b]
-    return np.asarray(np.all(nb >= 0, axis=1) & (same_face | smooth))
+    # A cell across an edge, half on either face, has its own normal halfway between its
+    # neighbours' and passes for a curve; its neighbours beside the edge do not (the mean of
+    # theirs is off by a quarter of the edge's angle). On a curved surface they do.
+    hit = np.all(nb >= 0, axis=1)
+    one_face = hit & (same_face | smooth)
+    smooth &= np.all(one_face[safe] | silent, axis=1)
+    return np.asarray(hit & (same_face | smooth))
 
 
 def beside_face(
