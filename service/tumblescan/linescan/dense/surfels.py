@@ -331,7 +331,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     spread = count * np.maximum(w[:, 1], 0.0)
     # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
     tilt_var = var / np.maximum(spread, 1e-300)
-    planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var)
+    planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
     planar |= beside_face(
         data.neighbours,
         data.cell,
