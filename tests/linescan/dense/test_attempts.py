@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tumblescan.linescan.dense import estimate as est
+from tumblescan.linescan.dense import attempts as est
 from tumblescan.linescan.validation import Similarity
 
 
@@ -33,12 +33,12 @@ def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, in
         rms = np.r_[np.full(unmatched, np.nan), np.full(10 - unmatched, 0.02)]
         # Each start ends at its own motion, tens of degrees from the others'.
         x = np.array([0.3 + 0.5 * len(made), 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
-        return est._Solve(FakeFit(scale, rms, x), None, 10, path)  # type: ignore[arg-type]
+        return est.Solve(FakeFit(scale, rms, x), None, 10, path)  # type: ignore[arg-type]
 
     def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
         passed = outcomes[len(made) - 1][1]
         check = Similarity(passed, 1.0 if passed else 9.0, 3.0, "covariance")
-        return est._Attempt(solve, solve.fit, check, warnings)
+        return est.Attempt(solve, solve.fit, check, warnings)
 
     monkeypatch.setattr(est, "_solve", solve)
     monkeypatch.setattr(est, "_judged", judged)
@@ -55,7 +55,7 @@ class Setup:
 
 def test_a_failed_check_leads_to_the_next_start(monkeypatch: pytest.MonkeyPatch) -> None:
     made = script(monkeypatch, [(1.0, False, 0), (1.0, True, 0), (1.0, True, 0)])
-    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert made == ["vote", "consensus"] and attempts == 2
     assert best.solve.path == "registration+consensus+dense"
     assert "two-frame-count check failed" in warnings[-1] and "the motion comes from" in warnings[-1]
@@ -63,13 +63,13 @@ def test_a_failed_check_leads_to_the_next_start(monkeypatch: pytest.MonkeyPatch)
 
 def test_a_frame_without_a_match_is_not_a_reason_for_another_start(monkeypatch: pytest.MonkeyPatch) -> None:
     made = script(monkeypatch, [(1.0, True, 1), (1.0, True, 0), (1.0, True, 0)])
-    _, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    _, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert made == ["vote"] and attempts == 1 and warnings == []
 
 
 def test_when_no_start_is_sound_the_least_flawed_is_kept_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
     made = script(monkeypatch, [(8.0, True, 0), (1.1, False, 0), (20.0, False, 0)])
-    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert made == ["vote", "consensus", "swarm"] and attempts == 3
     assert best.solve.path == "registration+consensus+dense"  # not poor beats a passed check on a poor fit
     assert "no start was sound" in warnings[-1]
@@ -89,11 +89,11 @@ def scripted_starts(
         name = next(k for k, v in begins.items() if v is start.guess.x)
         fit = FakeFit(scales[len(refined)], np.full(10, 0.02), ends[name])
         refined.append(start.guess.x)
-        return est._Solve(fit, start.guess, 10, path)  # type: ignore[arg-type]
+        return est.Solve(fit, start.guess, 10, path)  # type: ignore[arg-type]
 
     def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
         passed = len(refined) == 2
-        return est._Attempt(solve, solve.fit, Similarity(passed, 1.0, 3.0, "covariance"), warnings)
+        return est.Attempt(solve, solve.fit, Similarity(passed, 1.0, 3.0, "covariance"), warnings)
 
     monkeypatch.setattr(est, "_solve", solve)
     monkeypatch.setattr(est, "_judged", judged)
@@ -110,7 +110,7 @@ def test_a_start_where_a_poor_fit_ended_is_not_refined_again(monkeypatch: pytest
     # end there again, so only the swarm's start (29 deg off) is refined.
     begins = {"vote": X, "consensus": NEAR, "swarm": FAR}
     refined = scripted_starts(monkeypatch, begins, begins, [8.0, 1.0])
-    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert len(refined) == 2 and np.array_equal(refined[1], FAR) and attempts == 3
     assert best.solve.path == "registration+swarm+dense"
     assert "not refined again" in warnings[-1]
@@ -121,7 +121,7 @@ def test_a_check_failure_two_starts_agree_on_ends_the_search(monkeypatch: pytest
     # the swarm is not tried, and the failure is reported.
     begins = {"vote": X, "consensus": NEAR, "swarm": FAR}
     refined = scripted_starts(monkeypatch, begins, begins, [1.0, 1.0])
-    best, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert len(refined) == 1 and attempts == 2 and best.solve.path == "registration+cone+dense"
     assert "no start was sound" in warnings[-1] and best.problem() == "the two-frame-count check failed"
 
@@ -134,8 +134,8 @@ def test_a_second_start_that_ends_where_the_first_failed_ends_the_search(monkeyp
     monkeypatch.setattr(
         est,
         "_judged",
-        lambda s, solve, n2, w: est._Attempt(solve, solve.fit, Similarity(False, 9.0, 3.0, "covariance"), w),
+        lambda s, solve, n2, w: est.Attempt(solve, solve.fit, Similarity(False, 9.0, 3.0, "covariance"), w),
     )
-    _, warnings, attempts = est._best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    _, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert len(refined) == 2 and attempts == 2
     assert "ended where the motion above did" in warnings[-1]

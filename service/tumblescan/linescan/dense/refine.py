@@ -17,6 +17,8 @@ minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
 Levenberg-Marquardt steps (kept only when they lower that cost), with correspondences
 re-found once points have moved and the surfels rebuilt after large steps.
 
+Correspondences and the residual model: :mod:`.matching`.
+
 Three stages: every surfel matched in a neighbouring frame (right correspondences even from
 the initializer's rough start), then in random frames (the long time baselines fix the
 rates), then in every other frame from the converged start (each brings its own noise).
@@ -32,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles
@@ -41,12 +42,11 @@ from ..options import DenseConfig
 from ..sensor import SensorNoise
 from ..validation import canonical_cov
 from .covariance import patches, sandwich
-from .surfels import DenseData, LineMapping, Surfels, build_surfels, normal_variance
+from .matching import CAUCHY_C, Linearized, Matches, cauchy_cost, linearize, match, residuals, robust_sigma, weights
+from .surfels import DenseData, LineMapping, Surfels, build_surfels
 
 ALL_FREE = tuple(range(N_PARAMS))
 SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
-CAUCHY_C = 2.385  # Cauchy constant for 95 % efficiency under Gaussian noise
-MAX_NORMAL_ANGLE_COS = np.cos(np.radians(45.0))
 # Rebuild the surfels, and re-find correspondences, once points have moved this share of a surfel.
 SURFEL_REFRESH = 0.25
 REMATCH = 0.05
@@ -85,104 +85,6 @@ class DenseFit:
     @property
     def spin_only(self) -> bool:
         return self.free == SPIN_ONLY_FREE
-
-
-@dataclass(frozen=True)
-class _Matches:
-    src: IntArray  # source surfel of each residual
-    dst: IntArray  # target surfel
-
-
-def _match(
-    data: DenseData,
-    mapping: LineMapping,
-    surf: Surfels,
-    src: IntArray,
-    partner: IntArray,
-    gate_m: float,
-) -> _Matches:
-    """Nearest planar surfel of the partner frame for each (source, partner) pair, if it lies
-    within ``gate_m`` and faces the same way as the source's own surfel."""
-    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
-    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
-    usable = surf.planar[src]
-    src, partner = src[usable], partner[usable]
-    mapped = anchor_ref[src]
-    src_all, dst_all = [], []
-    for b in range(data.n_frames):
-        sel = np.flatnonzero(partner == b)
-        targets = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        if len(sel) == 0 or len(targets) == 0:
-            continue
-        dist, nn = cKDTree(anchor_ref[targets]).query(mapped[sel], k=1, distance_upper_bound=gate_m, workers=-1)
-        ok = np.isfinite(dist)
-        dst = targets[nn[ok]]
-        s = sel[ok]
-        facing = np.einsum("ni,ni->n", normal_ref[src[s]], normal_ref[dst]) > MAX_NORMAL_ANGLE_COS
-        src_all.append(src[s[facing]])
-        dst_all.append(dst[facing])
-    src_c = np.concatenate(src_all) if src_all else np.zeros(0, np.int64)
-    dst_c = np.concatenate(dst_all) if dst_all else np.zeros(0, np.int64)
-    return _Matches(src_c, dst_c)
-
-
-@dataclass(frozen=True)
-class _Linearized:
-    r: FloatArray  # centroid-to-plane residuals (m)
-    J: FloatArray  # their derivatives w.r.t. the free parameters
-    var: FloatArray  # model variance of each residual (m^2), before the common scale
-
-
-def _residuals(mapping: LineMapping, surf: Surfels, m: _Matches) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Centroid-to-plane residuals, the plane normals at ``T`` and the squared in-plane offsets.
-
-    The plane's normal is the mean of both surfels' (a symmetric objective): the normal's
-    noise times the in-plane offset between the centroids is the largest term of a residual's
-    variance, and the mean halves it."""
-    p = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
-    q = mapping.apply(surf.anchor_obs[m.dst], surf.line[m.dst])
-    n = mapping.rotate(surf.normal_obs[m.dst], surf.line[m.dst]) + mapping.rotate(
-        surf.normal_obs[m.src], surf.line[m.src]
-    )
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    d = p - q
-    r = np.einsum("ni,ni->n", n, d)
-    return np.asarray(r), n, np.asarray(np.einsum("ni,ni->n", d, d) - r**2)
-
-
-def _linearize(data: DenseData, mapping: LineMapping, surf: Surfels, m: _Matches, noise: SensorNoise) -> _Linearized:
-    xyz, line = surf.anchor_obs[m.src], surf.line[m.src]
-    r, n, offset2 = _residuals(mapping, surf, m)
-    J = mapping.normal_derivative(n, xyz, line) - mapping.normal_derivative(n, surf.anchor_obs[m.dst], surf.line[m.dst])
-    # The source centroid's noise along the normal, seen from the source's own sensor; the
-    # target centroid's; and the normal's tilt over the offset between the two.
-    n_src_obs = np.einsum("nji,nj->ni", mapping.Rt[line], n)
-    var = (
-        normal_variance(noise, xyz, n_src_obs) / surf.count[m.src]
-        + surf.var_m2[m.dst] / surf.count[m.dst]
-        + offset2 * (surf.normal_var_rad2[m.src] + surf.normal_var_rad2[m.dst]) / 4
-    )
-    return _Linearized(np.asarray(r), J, np.asarray(var))
-
-
-def _cauchy_weights(e: FloatArray, scale: float) -> FloatArray:
-    return np.asarray(1.0 / (1.0 + (e / (CAUCHY_C * scale)) ** 2))
-
-
-def _robust_sigma(r: FloatArray) -> float:
-    return float(1.4826 * np.median(np.abs(r))) if len(r) else 0.0
-
-
-def _cauchy_cost(e: FloatArray, scale: float) -> float:
-    c2 = (CAUCHY_C * scale) ** 2
-    return float(0.5 * c2 * np.sum(np.log1p(e**2 / c2)))
-
-
-def _weights(lin: _Linearized) -> tuple[FloatArray, float]:
-    """Weights ``cauchy(e / s) / var`` of the normalized residuals ``e = r / sqrt(var)``, and ``s``."""
-    e = lin.r / np.sqrt(lin.var)
-    scale = max(_robust_sigma(e), 1e-12)
-    return _cauchy_weights(e, scale) / lin.var, scale
 
 
 @dataclass
@@ -299,7 +201,7 @@ def _iterate(
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
-) -> tuple[FloatArray, _Matches, Surfels, float, int]:
+) -> tuple[FloatArray, Matches, Surfels, float, int]:
     """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
     distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
@@ -308,11 +210,11 @@ def _iterate(
     mapping = LineMapping(problem.full(z), data.tau_s, problem.free)
     if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = build_surfels(data, mapping, noise)
-    matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+    matches, matched_at, matched_gate = match(data, mapping, surf, src, partner, gate), mapping, gate
     lam = LM_START
     for _ in range(iterations):
-        lin = _linearize(data, mapping, surf, matches, noise)
-        w, scale = _weights(lin)
+        lin = linearize(data, mapping, surf, matches, noise)
+        w, scale = weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
         H, g = rows.T @ rows, -rows.T @ (lin.r * sw)
@@ -331,7 +233,7 @@ def _iterate(
             break
         # Tighten the gate as the frames come together. Surfels move rigidly with their lines,
         # so they are rebuilt only after large steps; correspondences once points have moved.
-        gate = max(floor, min(gate, 4 * CAUCHY_C * _robust_sigma(lin.r)))
+        gate = max(floor, min(gate, 4 * CAUCHY_C * robust_sigma(lin.r)))
         if _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
             surf = build_surfels(data, mapping, noise)
         if (
@@ -339,7 +241,7 @@ def _iterate(
             or gate < 0.9 * matched_gate
             or _shift(data, probe, matched_at, mapping) > REMATCH * data.surfel_m
         ):
-            matches, matched_at, matched_gate = _match(data, mapping, surf, src, partner, gate), mapping, gate
+            matches, matched_at, matched_gate = match(data, mapping, surf, src, partner, gate), mapping, gate
 
     return z, matches, surf, gate, step
 
@@ -350,23 +252,23 @@ def _damped_step(
     H: FloatArray,
     g: FloatArray,
     lam: float,
-    lin: _Linearized,
+    lin: Linearized,
     scale: float,
-    matches: _Matches,
+    matches: Matches,
     surf: Surfels,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
     last one) that lowers the Cauchy cost on these correspondences; None when none does."""
     data = problem.data
-    before = _cauchy_cost(lin.r / np.sqrt(lin.var), scale)
+    before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
     D = np.diag(np.diag(H))
     for _ in range(LM_TRIES):
         step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
         x = _on_gauge(problem, problem.full(z + step))
         dz = x[list(problem.free)] - z
         mapping = LineMapping(x, data.tau_s, problem.free)
-        r = _residuals(mapping, surf, matches)[0]
-        after = _cauchy_cost(r / np.sqrt(lin.var), scale)
+        r = residuals(mapping, surf, matches)[0]
+        after = cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
             return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
@@ -404,13 +306,13 @@ def _on_gauge(problem: _Problem, x: FloatArray) -> FloatArray:
     return out
 
 
-def _finish(problem: _Problem, z: FloatArray, m: _Matches, surf: Surfels, steps: int) -> DenseFit:
+def _finish(problem: _Problem, z: FloatArray, m: Matches, surf: Surfels, steps: int) -> DenseFit:
     """Covariance and residual statistics at ``z`` with the last step's correspondences."""
     data = problem.data
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
-    lin = _linearize(data, mapping, surf, m, problem.noise)
-    scale = _weights(lin)[1]
+    lin = linearize(data, mapping, surf, m, problem.noise)
+    scale = weights(lin)[1]
     cluster = patches(mapping.apply(surf.anchor_obs[m.src], surf.line[m.src]), CLUSTER_FRACTION * data.extent_m)
     cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * scale, cluster, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))

@@ -21,14 +21,10 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 from ..sensor import SensorNoise, azimuth_elevation
+from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, beside_face, flat_cells, inside_face
 from .returns import range_inliers
 
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
-# A surfel is planar when its thinnest axis is this much thinner than the next one and no
-# thicker than a few sensor sigmas (an edge or a corner is thick for its size).
-MAX_FLATNESS = 0.3
-MAX_THICKNESS_SIGMAS = 2.5
-MIN_SURFEL_POINTS = 6
 # Neighbouring cells of one surface differ in range by less than this many surfel sizes.
 MAX_RANGE_STEP = 4.0
 # Far returns (:func:`~.returns.range_inliers`) up to this share of the points are taken for the
@@ -36,26 +32,12 @@ MAX_RANGE_STEP = 4.0
 # those out let cells at edges pass for planar, and on the 100 m bench error/sigma rose from
 # 1.04 to 1.16. More than this are spurious returns and are left out.
 SPURIOUS_MIN_SHARE = 0.01
-# The 8 cells around a cell, (azimuth, elevation) steps; the 4 that share a side with it.
-NEIGHBOUR_OFFSETS = tuple((da, de) for da in (-1, 0, 1) for de in (-1, 0, 1) if da or de)
-SIDE_NEIGHBOURS = tuple(k for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if da == 0 or de == 0)
 # A surfel's normal pools the planar cells of every frame within this many surfel sizes (at T)
 # whose own normals agree within this angle.
 SHARED_RADIUS = 1.5
 # Incidence beyond this cosine counts as grazing (the along-ray noise grows as tan^2).
 MIN_COS_INCIDENCE = 0.15
 NOISE_COV_PASSES = 2
-# A cell is inside a face when its 8 neighbours' normals agree with its own within this.
-FACE_MAX_ANGLE = np.radians(20.0)
-# A cell on a curved surface (a tube, a dish) is inside a face too when its normal field is
-# smooth: every neighbour within CURVED_MAX_ANGLE, and its own normal within CURVED_MAX_KINK of
-# the mean of each pair of opposite neighbours' (a curvature bends both sides alike; an edge
-# bends one side only, which puts the mean half the edge's angle off).
-CURVED_MAX_ANGLE = np.radians(45.0)
-CURVED_MAX_KINK = np.radians(8.0)
-OPPOSITE_PAIRS = tuple(
-    (k, NEIGHBOUR_OFFSETS.index((-da, -de))) for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS) if (da, de) > (0, 0)
-)
 SHARED_MAX_ANGLE = np.radians(30.0)
 
 
@@ -234,44 +216,6 @@ def normal_variance(noise: SensorNoise, xyz_obs: FloatArray, n_obs: FloatArray) 
     return np.asarray(noise.range_sigma_m**2 * cos2 + (noise.angle_sigma_rad * rho) ** 2 * (1 - cos2))
 
 
-def _planar(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
-    """Surfels flat for their size and no thicker than a few sensor sigmas (eigenvalues ``w``
-    ascending; an edge or a corner is thick)."""
-    thin = w[:, 0]
-    return np.asarray(
-        (count >= MIN_SURFEL_POINTS) & (thin <= MAX_FLATNESS * w[:, 1]) & (thin <= MAX_THICKNESS_SIGMAS**2 * var)
-    )
-
-
-def _inside_face(data: DenseData, normal_obs: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
-    """Cells whose 8 neighbours in the view were hit and face the same way (within
-    ``FACE_MAX_ANGLE``), or bend smoothly with them (a curved surface: see ``CURVED_MAX_KINK``).
-    A cell across an edge passes for flat when few of its points lie on the other face, yet its
-    normal and centroid lean towards that face, always the same way: one of its neighbours lies
-    on that face, and the opposite one does not.
-
-    Also tried, and left out: a neighbour across an edge not objecting when every point of the
-    cell keeps clear of its plane (by 2 noise sigmas and 6 deg of tilt over a cell). It took
-    4-5 % more points on the real shapes, helped the truss and harmed the dish and the
-    telescope, and on the 128-pixel box test it moved the spin rate by 4 sigmas: a one-sided
-    bias, as with the other ways of taking cells near edges in (docs/linescan.md)."""
-    nb = data.neighbours
-    safe = np.where(nb >= 0, nb, 0)
-    cos = np.einsum("ni,nki->nk", normal_obs, normal_obs[safe])
-    # A neighbour with too few points for a normal of its own neither vouches nor objects.
-    silent = count[safe] < MIN_SURFEL_POINTS
-    flat = np.all((np.abs(cos) > np.cos(FACE_MAX_ANGLE)) | silent, axis=1)
-    # Normals of one frame face the sensor, so they share a sign; the mean of opposite
-    # neighbours' normals lies along the cell's own on a smoothly curved surface.
-    smooth = np.all((cos > np.cos(CURVED_MAX_ANGLE)) | silent, axis=1)
-    for a, b in OPPOSITE_PAIRS:
-        mean = normal_obs[safe[:, a]] + normal_obs[safe[:, b]]
-        mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
-        kink_ok = np.einsum("ni,ni->n", normal_obs, mean) > np.cos(CURVED_MAX_KINK)
-        smooth &= kink_ok | silent[:, a] | silent[:, b]
-    return np.asarray(np.all(nb >= 0, axis=1) & (flat | smooth))
-
-
 def _facing_sensor(normal_obs: FloatArray, anchor_obs: FloatArray) -> FloatArray:
     """Normals flipped, where needed, to face the sensor (at the origin of its own frame)."""
     return np.asarray(normal_obs * np.where(np.einsum("ni,ni->n", normal_obs, anchor_obs) > 0, -1.0, 1.0)[:, None])
@@ -383,8 +327,23 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         normal_ref = np.linalg.eigh(cov - noise_ref)[1][:, :, 0]
     normal_obs = _facing_sensor(np.einsum("nji,nj->ni", Rt, normal_ref), anchor_obs)
     var = normal_variance(noise, anchor_obs, normal_obs)
-    planar = _planar(w, var, count) & data.interior & _inside_face(data, normal_obs, count)
+    flat = flat_cells(w, var, count)
     spread = count * np.maximum(w[:, 1], 0.0)
+    # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
+    tilt_var = var / np.maximum(spread, 1e-300)
+    planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
+    planar |= beside_face(
+        data.neighbours,
+        data.cell,
+        mapped,
+        mean,
+        np.einsum("nij,nj->ni", Rt, normal_obs),
+        var,
+        tilt_var,
+        count,
+        flat & data.interior & ~planar,
+        planar,
+    )
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face).
