@@ -43,7 +43,7 @@ def reject_outliers(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Obs
     observations with it. Returns the kept observations and their fit."""
     peeled = False
     for _ in range(OUTLIER_PEELS):
-        r = np.abs(fit.residuals_px.reshape(-1, 2)).max(axis=1)
+        r = _worse_end_px(fit)
         bad = r > max(OUTLIER_MIN_PX, OUTLIER_SCALES * robust_scale_px(fit.residuals_px))
         if not bad.any():
             break
@@ -60,24 +60,32 @@ def reject_outliers(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Obs
     return obs, fit
 
 
-def drop_stray_tracks(
-    obs: Observations, fit: RigidFit, t_ref: float, refit: bool = True
-) -> tuple[Observations, RigidFit]:
-    """Drop the tracks whose median larger end-point residual exceeds
-    ``max(STRAY_MIN_PX, STRAY_FACTOR × the median track's)`` and refit (not below 2 tracks).
-    A track that follows no rigid line (a shadow's edge, a track that switched edges for good) is
-    off along its whole length, so the per-observation peeling, relative to a scale it inflates
-    itself, can leave it in. Without ``refit`` the fit returned is ``fit`` (of the old tracks);
-    ``obs`` itself is returned when nothing is dropped."""
-    r = np.abs(fit.residuals_px.reshape(-1, 2)).max(axis=1)
+def _worse_end_px(fit: RigidFit) -> FloatArray:
+    """Each observation's larger end-point residual (px, absolute)."""
+    return np.asarray(np.abs(fit.residuals_px.reshape(-1, 2)).max(axis=1), dtype=float)
+
+
+def without_stray_tracks(obs: Observations, fit: RigidFit) -> Observations | None:
+    """``obs`` without the tracks whose median larger end-point residual under ``fit`` exceeds
+    ``max(STRAY_MIN_PX, STRAY_FACTOR × the median track's)``; None when there are none, or when
+    under 2 tracks would remain. A track that follows no rigid line (a shadow's edge, a track that
+    switched edges for good) is off along its whole length, so the per-observation peeling,
+    relative to a scale it inflates itself, can leave it in."""
+    r = _worse_end_px(fit)
     per_track = np.array([np.median(r[obs.track == j]) for j in range(obs.n_tracks)])
     stray = per_track > max(STRAY_MIN_PX, STRAY_FACTOR * float(np.median(per_track)))
     if not stray.any() or int((~stray).sum()) < 2:
+        return None
+    return subset(obs, ~stray[obs.track])
+
+
+def drop_stray_tracks(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Observations, RigidFit]:
+    """The observations without stray tracks (``without_stray_tracks``) and their fit, refitted
+    from ``fit``; ``obs`` and ``fit`` when none is dropped."""
+    kept = without_stray_tracks(obs, fit)
+    if kept is None:
         return obs, fit
-    obs = subset(obs, ~stray[obs.track])
-    if not refit:
-        return obs, fit
-    return obs, fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
+    return kept, fit_rigid(kept, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
 def rematch(

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray, Progress
-from .association import drop_stray_tracks
+from .association import without_stray_tracks
 from .rigid import (
     Observations,
     RigidFit,
@@ -232,12 +232,12 @@ def best_of_starts_without_strays(
     radius: float,
 ) -> tuple[Observations, RigidFit]:  # fmt: skip
     """``best_of_starts``; then, when its winner finds tracks that follow no rigid line (px off all
-    along, ``association.drop_stray_tracks``), the starts compared again without them. Such tracks
+    along, ``association.without_stray_tracks``), the starts compared again without them. Such tracks
     pull every fit, a wrong basin's least (measured: two 16-frame tracks 15-25 px off the true
     motion made a fit 3.9 % off the cheaper). Returns the observations kept and their fit."""
     fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius)
-    kept, _ = drop_stray_tracks(obs, fit, t_ref, refit=False)
-    if kept is obs:
+    kept = without_stray_tracks(obs, fit)
+    if kept is None:
         return obs, fit
     return kept, best_of_starts(kept, starts, t_ref, w_lo, w_hi, centre, radius)
 
