@@ -332,12 +332,13 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
     tilt_var = var / np.maximum(spread, 1e-300)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
+    normal_ref = np.einsum("nij,nj->ni", Rt, normal_obs)  # as normal_ref, now facing the sensor
     planar |= beside_face(
         data.neighbours,
         data.cell,
         mapped,
         mean,
-        np.einsum("nij,nj->ni", Rt, normal_obs),
+        normal_ref,
         var,
         tilt_var,
         count,
@@ -347,7 +348,6 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face).
-    normal_ref = np.einsum("nij,nj->ni", Rt, normal_obs)
     shared, spread[planar] = _shared_normals(
         mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
     )
