@@ -150,14 +150,23 @@ def test_a_cancellation_during_an_outage_is_recorded_once_the_store_is_back(
     assert not rt.artifacts.job_dir(job_id).exists()
 
 
+def _cancel_while_never_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, down: str
+) -> tuple[Runtime, str, str | None]:
+    """A job cancelled while it runs, with the store's ``down`` write failing for good; the
+    runtime, the job and what ``run_job`` returned."""
+    kind = CountingKind()
+    rt, job_id = setup(tmp_path, monkeypatch, kind, **{down: 1000})
+    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
+    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
+    return rt, job_id, runner.run_job(rt, job_id)
+
+
 def test_a_cancellation_the_store_never_hears_of_leaves_the_job_to_the_reaper(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    kind = CountingKind()
-    rt, job_id = setup(tmp_path, monkeypatch, kind, mark_cancelled=1000)
-    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
-    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
-    assert runner.run_job(rt, job_id) is None  # not an OperationalError out of the worker
+    rt, job_id, outcome = _cancel_while_never_back(tmp_path, monkeypatch, "mark_cancelled")
+    assert outcome is None  # not an OperationalError out of the worker
     job = rt.store.get(job_id)
     assert job is not None and job.status == "running"
     assert rt.artifacts.path(job_id, "input-data.bin").read_bytes() == b"uploaded"
@@ -166,10 +175,7 @@ def test_a_cancellation_the_store_never_hears_of_leaves_the_job_to_the_reaper(
 def test_files_deleted_but_not_marked_so_still_end_the_job_cancelled(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    kind = CountingKind()
-    rt, job_id = setup(tmp_path, monkeypatch, kind, mark_artifacts_deleted=1000)
-    monkeypatch.setattr(runner, "STORE_PATIENCE_S", 0.0)
-    kind.meanwhile = lambda: rt.store.request_cancel(job_id)
-    assert runner.run_job(rt, job_id) == "cancelled"
+    rt, job_id, outcome = _cancel_while_never_back(tmp_path, monkeypatch, "mark_artifacts_deleted")
+    assert outcome == "cancelled"
     job = rt.store.get(job_id)
     assert job is not None and job.status == "cancelled"
