@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..._typing import FloatArray, Progress
 from ..errors import FramesUnusableError, NoSurfacesError
@@ -22,6 +21,7 @@ from ..options import FramesOptions
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity
 from .consensus import INLIER_RAD, pair_misfit, without_precession
+from .degeneracy import precession_p_value
 from .refine import DenseFit, refine_dense
 from .registration import PairTransforms, register_consecutive
 from .search import OverlapCost, swarm_start
@@ -245,9 +245,7 @@ def _swarm(setup: Setup, pairs: PairTransforms) -> Start:
 
 
 def _precession_insignificant(fit: DenseFit, opts: FramesOptions, warnings: list[str]) -> bool:
-    sd = float(np.sqrt(fit.cov[5, 5]))
-    z = abs(float(fit.x[5])) / sd if sd > 0 else np.inf
-    p_value = float(2 * stats.norm.sf(z))
+    p_value = precession_p_value(fit.x, fit.cov)
     if p_value < opts.significance:
         return False
     warnings.append(

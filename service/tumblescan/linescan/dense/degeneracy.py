@@ -13,6 +13,7 @@ called imprecise, so that a miss of those limits is not silent.
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 from ..._typing import FloatArray
 from ...geometry.rotations import axis_from_angles
@@ -32,6 +33,36 @@ SLOW_PRECESSION_DEG = 10.0
 AXIS_LIMIT_DEG = 0.1
 RATE_LIMIT_DEG_S = 0.05
 IMPRECISE_SIGMAS = 3.0
+
+
+def precession_p_value(x: FloatArray, cov: FloatArray) -> float:
+    """The p-value of "no precession" for a spin-precession 9-vector ``x`` with covariance ``cov``.
+
+    A pure spin is either ``w_p = 0`` or a precession about the spin axis itself (the two turn
+    the target as one rotation). So two Wald tests, and the larger p-value: of ``w_p`` alone, and
+    of the precession's part across the spin axis, ``v = w_p (l_p - (l_p . l_s) l_s)`` (2 degrees
+    of freedom, ``v^T C_v^+ v ~ chi2(2)`` with ``C_v = G C G^T`` and ``G = dv/dx`` by central
+    differences). Near parallel axes ``w_p`` alone can look significant while the fit cannot tell
+    its axis from the spin axis; ``v`` then is not.
+    """
+    z = abs(float(x[5])) / float(np.sqrt(cov[5, 5])) if cov[5, 5] > 0 else np.inf
+    p_rate = float(2 * stats.norm.sf(z))
+    v = _across_spin(x)
+    G = np.empty((3, 6))
+    for k in range(6):
+        h = 1e-7 * max(abs(float(x[k])), 1.0)
+        step = np.zeros(len(x))
+        step[k] = h
+        G[:, k] = (_across_spin(x + step) - _across_spin(x - step)) / (2 * h)
+    C_v = G @ cov[:6, :6] @ G.T
+    chi2 = float(v @ np.linalg.pinv(C_v, rcond=1e-9, hermitian=True) @ v)
+    return max(p_rate, float(stats.chi2.sf(chi2, 2)))
+
+
+def _across_spin(x: FloatArray) -> FloatArray:
+    """The precession vector's part across the spin axis, ``w_p (l_p - (l_p . l_s) l_s)`` (rad/s)."""
+    l_s, l_p = axis_from_angles(x[0], x[1]), axis_from_angles(x[3], x[4])
+    return np.asarray(x[5] * (l_p - (l_p @ l_s) * l_s), dtype=float)
 
 
 def degenerate_warnings(data: DenseData, fit: DenseFit, opts: FramesOptions, noise: SensorNoise) -> list[str]:
