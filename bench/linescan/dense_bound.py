@@ -197,8 +197,8 @@ def dense_bound(
     mapping = LineMapping(x, tau, tuple(range(9)))
     ref = sim.reference_m[keep]
     counts = np.bincount(face, minlength=n_faces)
-    centres = np.stack([np.bincount(face, weights=ref[:, k], minlength=n_faces) for k in range(3)], axis=1)
-    centres = centres / np.maximum(counts, 1)[:, None]
+    sums = np.stack([np.bincount(face, weights=ref[:, k], minlength=n_faces) for k in range(3)], axis=1)
+    centres = np.asarray(sums / np.maximum(counts, 1)[:, None], dtype=float)
     tangents = np.stack(perpendiculars(np.where(counts[:, None] > 0, normals, [1.0, 0.0, 0.0])), axis=1)
     F_mm = np.zeros((9, 9))
     F_mf = np.zeros((n_faces, 9, 3))
