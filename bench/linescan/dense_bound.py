@@ -43,6 +43,7 @@ from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, normal
 from tumblescan.linescan.sensor import perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad
+from tumblescan.target.motion import apply_rotation
 from tumblescan.target.shape import SatelliteShape
 
 FloatArray = NDArray[np.float64]
@@ -186,6 +187,12 @@ def dense_bound(
     x = truth.params()
     face, normals = faces if faces is not None else face_of_hits(scene, motion, sim.reference_m)
     n_faces = len(normals)
+    # The simulator's faces and reference points are at the motion's own reference time; the
+    # planes solved for are those at T, which the motion turns them into. (Normals at the wrong
+    # time gave rate bounds 30-45 % apart at T a few seconds apart; the rates' bound does not
+    # depend on T.)
+    tau_s = reference_time_s - motion.reference_time_s
+    normals = np.asarray(apply_rotation(motion.params(), np.full(n_faces, tau_s), normals), dtype=float)
     keep = face >= 0 if hits is None else (face >= 0) & hits
     # Too few hits to pin a face's plane: they fit it exactly and say nothing of the motion.
     counts = np.bincount(face[keep], minlength=n_faces)
@@ -195,7 +202,7 @@ def dense_bound(
     _, first, line = np.unique(line_key, return_index=True, return_inverse=True)
     tau = sim.t_s[keep][first] - reference_time_s
     mapping = LineMapping(x, tau, tuple(range(9)))
-    ref = sim.reference_m[keep]
+    ref = motion.position(sim.reference_m[keep], np.full(len(xyz), reference_time_s))
     counts = np.bincount(face, minlength=n_faces)
     sums = np.stack([np.bincount(face, weights=ref[:, k], minlength=n_faces) for k in range(3)], axis=1)
     centres = np.asarray(sums / np.maximum(counts, 1)[:, None], dtype=float)

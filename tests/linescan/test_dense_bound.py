@@ -93,3 +93,15 @@ def test_the_mesh_faces_bound_of_the_box_is_the_box_faces_bound() -> None:
     for key in ("spin_axis_deg", "spin_rate_deg_s", "precession_axis_deg", "precession_rate_deg_s", "center_m"):
         assert by_mesh[key] == pytest.approx(by_box[key], rel=0.03), key
     assert by_mesh["faces"] == by_box["faces"]
+
+
+def test_the_bound_of_the_rates_does_not_depend_on_the_reference_time() -> None:
+    # The rates, the precession axis and the centre are the same whatever time the motion is
+    # stated at, and so are their bounds; the faces' normals must be turned to that time.
+    motion = motion_for(5, distance_m=100.0)
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    sim = simulate_frames(motion, scene, seed=5)
+    faces = face_of_hits(scene, motion, sim.reference_m)
+    first, middle = (dense_bound(motion, scene, sim, float(t), faces=faces) for t in (sim.t_s[0], np.median(sim.t_s)))
+    for key in ("spin_rate_deg_s", "precession_axis_deg", "precession_rate_deg_s", "center_m"):
+        assert middle[key] == pytest.approx(first[key], rel=1e-6), key
