@@ -1,4 +1,4 @@
-"""Cramer-Rao bound of the motion from dense frames of a piecewise-planar target.
+"""Cramer-Rao bound of the motion from dense frames of a target modelled as planes.
 
 The bench's reference for what dense frames can deliver, the counterpart of the corner-track
 bound in ``bench/accuracy.py``. Each simulated hit lies on one face ``f`` of the target, a
@@ -13,6 +13,22 @@ bound on the motion is the inverse of the Schur complement of the faces' block o
 information ``sum J^T J / Var r``. It credits the estimator with knowing which face each
 point is on, and ignores edges and silhouettes (which carry little at 2 cm of range noise),
 so no estimator that models the target as planes does better.
+
+Faces of any shape (:func:`mesh_faces`): the shape's triangle mesh, its coplanar triangles
+grouped into faces (region growing from the largest triangle: a triangle joins a face when
+it shares a vertex with one of its triangles, its normal is within ``COPLANAR_DEG`` of the
+face's and its vertices within ``COPLANAR_M`` of the face's plane; tested against the seed's
+plane, not the neighbour's, so a finely tessellated curve cannot drift into one face). Each
+hit is given the face of the triangle nearest to it (it lies on one: Open3D's closest-point
+query returns the triangle's id). On the box this gives the box's 18 faces.
+On curved tessellated surfaces (the cylinders of the telescope and the octagon, the dishes,
+the Hubble mesh's tube) every flat facet is one face: the bound then credits the estimator
+with the facet partition and with the facets being exactly flat, so it is the bound of an
+estimator modelling the target as those planes, not of one fitting the true curved surface
+(which would have fewer nuisance parameters: a cylinder has 5 for all its facets). A face
+with fewer than ``MIN_FACE_POINTS`` hits fits its plane exactly (3 nuisance parameters) and
+tells nothing about the motion: it is left out, as are hits on a degenerate (zero-area)
+triangle, so that no near-singular face block enters the Schur complement.
 """
 
 from __future__ import annotations
@@ -27,22 +43,38 @@ from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, normal
 from tumblescan.linescan.sensor import perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad
+from tumblescan.target.motion import apply_rotation
 from tumblescan.target.shape import SatelliteShape
 
 FloatArray = NDArray[np.float64]
-# A hit belongs to a face when it lies within this of the face's plane (metres, body frame).
+IntArray = NDArray[np.int64]
+# A hit belongs to a face when it lies within this of the face's plane (metres, body frame);
+# the simulator casts in float32, a few micrometres at 100 m.
 ON_FACE_M = 1e-4
+# Triangles are one face when their planes agree this well (the brief's tight tolerance).
+COPLANAR_DEG = 0.5
+COPLANAR_M = 1e-3
+# Vertices closer than this are one vertex (mesh files repeat a vertex per normal or UV).
+SAME_VERTEX_M = 1e-6
+# A face needs this many hits to say anything beyond its own plane's 3 parameters.
+MIN_FACE_POINTS = 4
 CHUNK = 200_000
 
 
-def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple[NDArray[np.int64], FloatArray]:
-    """Face index of each hit (``-1`` when none) and the faces' unit normals in the sensor
-    frame at the reference time, ``(faces, 3)``; faces are ``6 * box + 2 * axis + side``."""
+def _body_frame(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The hits in the body frame, ``(n, 3)``, and ``R_body_to_sensor``, ``(3, 3)``."""
     R = np.asarray(scene.R_body_to_sensor, dtype=float)
     origin = np.asarray(motion.center_m) + np.asarray(scene.body_offset_m)
-    body = (reference_m - origin) @ R  # R^T (p - origin), row-wise
+    return (reference_m - origin) @ R, R  # R^T (p - origin), row-wise
+
+
+def box_face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple[IntArray, FloatArray]:
+    """The box satellite's faces from its boxes, ``6 * box + 2 * axis + side``: face index of
+    each hit (``-1`` when none) and the faces' unit normals in the sensor frame, ``(18, 3)``.
+    The reference the mesh faces of :func:`face_of_hits` are checked against."""
     if not isinstance(scene.shape, SatelliteShape):
-        raise ValueError(f"the dense bound is computed for the box satellite only, not {scene.shape.kind!r}")
+        raise ValueError(f"box faces are those of the box satellite, not of {scene.shape.kind!r}")
+    body, R = _body_frame(scene, motion, reference_m)
     boxes = scene.shape.boxes()
     face = np.full(len(body), -1, dtype=np.int64)
     normals = np.zeros((6 * len(boxes), 3))
@@ -57,23 +89,124 @@ def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple
     return face, normals
 
 
+def normal_of_triangle(vertices_m: FloatArray, triangles: IntArray) -> FloatArray:
+    """Unit normal of each triangle, ``(T, 3)``; zero for a degenerate (zero-area) one."""
+    corners = vertices_m[triangles]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    twice_area = np.linalg.norm(cross, axis=1, keepdims=True)
+    return np.asarray(np.where(twice_area > 1e-12, cross / np.maximum(twice_area, 1e-300), 0.0), dtype=float)
+
+
+def mesh_faces(vertices_m: FloatArray, triangles: IntArray) -> tuple[IntArray, FloatArray]:
+    """Coplanar triangles grouped into faces: the face of each triangle ``(T,)`` and the faces'
+    unit normals ``(F, 3)`` (zero for a degenerate triangle, which is a face of its own).
+
+    vertices_m: ``(V, 3)`` body frame; triangles: ``(T, 3)`` vertex indices.
+    """
+    corners = vertices_m[triangles]  # (T, 3 corners, 3)
+    twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    normal = normal_of_triangle(vertices_m, triangles)
+    flat = np.any(normal != 0, axis=1)
+    # One id per vertex position, then each vertex's triangles (CSR).
+    _, vid = np.unique(np.round(vertices_m / SAME_VERTEX_M), axis=0, return_inverse=True)
+    tri_vid = vid.reshape(-1)[triangles]
+    order = np.argsort(tri_vid.ravel(), kind="stable")
+    bounds = np.searchsorted(tri_vid.ravel()[order], np.arange(vid.max() + 2))
+    tri_of_vertex = order // 3
+    cos_tol = np.cos(np.radians(COPLANAR_DEG))
+    face = np.full(len(triangles), -1, dtype=np.int64)
+    normals: list[FloatArray] = []
+    for seed in np.argsort(-twice_area, kind="stable"):
+        if face[seed] >= 0:
+            continue
+        f, n = len(normals), normal[seed]
+        normals.append(n)
+        face[seed] = f
+        if not flat[seed]:
+            continue
+        offset = float(n @ corners[seed, 0])
+        stack = [int(seed)]
+        while stack:
+            t = stack.pop()
+            near = np.concatenate([tri_of_vertex[bounds[v] : bounds[v + 1]] for v in tri_vid[t]])
+            near = near[face[near] < 0]
+            near = near[
+                (normal[near] @ n >= cos_tol) & np.all(np.abs(corners[near] @ n - offset) <= COPLANAR_M, axis=1)
+            ]
+            near = np.unique(near)
+            face[near] = f
+            stack += near.tolist()
+    return face, np.asarray(normals, dtype=float).reshape(-1, 3)
+
+
+def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple[IntArray, FloatArray]:
+    """Face index of each hit (``-1`` when on no face: off the mesh or on a degenerate
+    triangle) and the faces' unit normals in the sensor frame at the reference time,
+    ``(faces, 3)``; faces are the mesh's coplanar triangles (:func:`mesh_faces`)."""
+    from tumblescan._open3d import load_open3d
+
+    o3d = load_open3d()
+    mesh = scene.shape.mesh()
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    triangles = np.asarray(mesh.triangles, dtype=np.int64)
+    tri_face, normals_body = mesh_faces(vertices, triangles)
+    body, R = _body_frame(scene, motion, reference_m)
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+    closest = rc.compute_closest_points(o3d.core.Tensor(body.astype(np.float32)), nthreads=0)
+    triangle = closest["primitive_ids"].numpy().astype(np.int64)
+    valid = triangle < len(triangles)
+    triangle[~valid] = 0
+    # Open3D's closest point is off by up to a millimetre on slender triangles (the 6 cm edges
+    # of the box's panels), its triangle is right: the test is the distance to that triangle's
+    # plane, in float64. Within a millimetre of an edge the neighbour face's triangle may come
+    # back, on whose plane the hit also lies to a millimetre: no matter against 2 cm of noise.
+    first = vertices[triangles[triangle, 0]]
+    off = np.abs(np.einsum("ni,ni->n", body - first, normal_of_triangle(vertices, triangles)[triangle])) > COPLANAR_M
+    face = np.where(off | ~valid, -1, tri_face[triangle])
+    degenerate = ~np.any(normals_body != 0, axis=1)
+    face[(face >= 0) & degenerate[np.maximum(face, 0)]] = -1
+    return face.astype(np.int64), normals_body @ R.T
+
+
 def dense_bound(
-    motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float, *, hits: NDArray[np.bool_] | None = None
+    motion: Motion,
+    scene: Scene,
+    sim: FrameCloud,
+    reference_time_s: float,
+    *,
+    hits: NDArray[np.bool_] | None = None,
+    faces: tuple[IntArray, FloatArray] | None = None,
 ) -> dict[str, float]:
-    """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units."""
+    """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units.
+
+    faces: each hit's face and the faces' sensor-frame normals; by default the mesh's
+    coplanar triangles (:func:`face_of_hits`).
+    """
     truth = motion.at_reference(reference_time_s)
     x = truth.params()
-    face, normals = face_of_hits(scene, motion, sim.reference_m)
+    face, normals = faces if faces is not None else face_of_hits(scene, motion, sim.reference_m)
+    n_faces = len(normals)
+    # The simulator's faces and reference points are at the motion's own reference time; the
+    # planes solved for are those at T, which the motion turns them into. (Normals at the wrong
+    # time gave rate bounds 30-45 % apart at T a few seconds apart; the rates' bound does not
+    # depend on T.)
+    tau_s = reference_time_s - motion.reference_time_s
+    normals = np.asarray(apply_rotation(motion.params(), np.full(n_faces, tau_s), normals), dtype=float)
     keep = face >= 0 if hits is None else (face >= 0) & hits
+    # Too few hits to pin a face's plane: they fit it exactly and say nothing of the motion.
+    counts = np.bincount(face[keep], minlength=n_faces)
+    keep &= counts[np.maximum(face, 0)] >= MIN_FACE_POINTS
     xyz, face = sim.xyz_true_m[keep], face[keep]
     line_key = sim.frame[keep].astype(np.int64) * scene.scanner.lines + sim.line[keep]
     _, first, line = np.unique(line_key, return_index=True, return_inverse=True)
     tau = sim.t_s[keep][first] - reference_time_s
     mapping = LineMapping(x, tau, tuple(range(9)))
-    n_faces = len(normals)
-    ref = sim.reference_m[keep]
-    centres = np.array([ref[face == f].mean(axis=0) if np.any(face == f) else np.zeros(3) for f in range(n_faces)])
-    tangents = np.stack(perpendiculars(normals), axis=1)  # (faces, 2, 3)
+    ref = motion.position(sim.reference_m[keep], np.full(len(xyz), reference_time_s))
+    counts = np.bincount(face, minlength=n_faces)
+    sums = np.stack([np.bincount(face, weights=ref[:, k], minlength=n_faces) for k in range(3)], axis=1)
+    centres = np.asarray(sums / np.maximum(counts, 1)[:, None], dtype=float)
+    tangents = np.stack(perpendiculars(np.where(counts[:, None] > 0, normals, [1.0, 0.0, 0.0])), axis=1)
     F_mm = np.zeros((9, 9))
     F_mf = np.zeros((n_faces, 9, 3))
     F_ff = np.zeros((n_faces, 3, 3))
@@ -89,15 +222,20 @@ def dense_bound(
         tilt = np.einsum("nki,ni->nk", tangents[fc], y)
         J_f = np.concatenate([tilt, -np.ones((len(y), 1))], axis=1)
         F_mm += (J_m * w[:, None]).T @ J_m
-        for f in np.unique(fc):
-            s = fc == f
-            F_mf[f] += (J_m[s] * w[s, None]).T @ J_f[s]
-            F_ff[f] += (J_f[s] * w[s, None]).T @ J_f[s]
-    schur = F_mm.copy()
-    for f in range(n_faces):
-        # pinv: a face hit by a point or two fits its own plane and tells nothing.
-        schur -= F_mf[f] @ np.linalg.pinv(F_ff[f], rcond=1e-10, hermitian=True) @ F_mf[f].T
-    cov = np.asarray(np.linalg.inv(schur), dtype=np.float64)
+        # Per-face sums of the outer products, one bincount per entry (thousands of faces).
+        for j in range(3):
+            wj = w * J_f[:, j]
+            for i in range(9):
+                F_mf[:, i, j] += np.bincount(fc, weights=wj * J_m[:, i], minlength=n_faces)
+            for k in range(j, 3):
+                F_ff[:, j, k] += np.bincount(fc, weights=wj * J_f[:, k], minlength=n_faces)
+    F_ff = np.triu(F_ff) + np.transpose(np.triu(F_ff, 1), (0, 2, 1))
+    used = np.flatnonzero(counts > 0)
+    # pinv: the hits of a face along one scan line leave its tilt about that line free (no
+    # information there, and none lost on the motion: the line moves rigidly).
+    absorbed = np.einsum("fij,fjk,flk->il", F_mf[used], np.linalg.pinv(F_ff[used], rcond=1e-10, hermitian=True),
+                         F_mf[used])  # fmt: skip
+    cov = np.asarray(np.linalg.inv(F_mm - absorbed), dtype=np.float64)
     deg = np.degrees
     return {
         "spin_axis_deg": float(deg(axis_sigma_rad(x, cov, 0, 1))),
@@ -106,7 +244,7 @@ def dense_bound(
         "precession_rate_deg_s": float(deg(np.sqrt(cov[5, 5]))),
         "center_m": float(np.sqrt(np.trace(cov[6:9, 6:9]))),
         "points": len(xyz),
-        "faces": int(np.count_nonzero(np.any(F_ff != 0, axis=(1, 2)))),
+        "faces": len(used),
     }
 
 
