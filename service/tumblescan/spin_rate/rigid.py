@@ -19,6 +19,7 @@ import numpy as np
 
 from .._typing import FloatArray, IntArray
 from ..geometry.rotations import tangent_basis
+from .rigid_model import RigidModel
 from .rotation import rot
 
 
@@ -146,58 +147,6 @@ def init_structure(
     return np.array(P), np.array(D)
 
 
-class _Model:
-    """Parameter packing and residuals of the rigid model."""
-
-    def __init__(
-        self, obs: Observations, axis0: FloatArray, p0: FloatArray, d0: FloatArray, t_ref: float, drift: bool
-    ) -> None:
-        self.obs, self.t_ref, self.drift = obs, t_ref, drift
-        self.axis0 = axis0
-        self.e_axis = tangent_basis(axis0)
-        self.p0, self.d0 = p0, d0
-        self.f = np.array([np.column_stack(tangent_basis(d)) for d in d0])  # (T, 3, 2)
-        self.n_global = 5 + (2 if drift else 0)
-        # One rotation per frame, not per observation: every line of a frame shares its time, and
-        # the residuals are evaluated some 20 times per Jacobian.
-        self.dt = obs.t_s - t_ref
-        self.dt_frame, self.frame_of = np.unique(self.dt, return_inverse=True)
-        e = obs.ends_px
-        self.e_h = np.concatenate([e, np.ones((*e.shape[:2], 1))], axis=2)  # (O, 2, 3)
-
-    def unpack(self, x: FloatArray) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        omega = float(x[0])
-        a = self.axis0 + x[1] * self.e_axis[0] + x[2] * self.e_axis[1]
-        a = a / np.linalg.norm(a)
-        c0 = np.array([x[3], x[4], 1.0])
-        v = np.array([x[5], x[6], 0.0]) if self.drift else np.zeros(3)
-        L = x[self.n_global :].reshape(-1, 4)
-        d = self.d0 + np.einsum("tij,tj->ti", self.f, L[:, :2])
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        p = self.p0 + np.einsum("tij,tj->ti", self.f, L[:, 2:])
-        return omega, a, c0, v, p, d
-
-    def residuals(self, x: FloatArray) -> FloatArray:
-        omega, a, c0, v, p, d = self.unpack(x)
-        o = self.obs
-        R = rot(a, omega * self.dt_frame)[self.frame_of]
-        X = c0 + v * self.dt[:, None] + np.einsum("oij,oj->oi", R, p[o.track])
-        D = np.einsum("oij,oj->oi", R, d[o.track])
-        line = _cross_rows(X @ o.K.T, D @ o.K.T)
-        line = line / np.sqrt(line[:, 0] * line[:, 0] + line[:, 1] * line[:, 1])[:, None]
-        return np.asarray(np.einsum("oki,oi->ok", self.e_h, line).ravel(), dtype=float)
-
-
-def _cross_rows(u: FloatArray, w: FloatArray) -> FloatArray:
-    """Row-wise ``u × w`` for (N, 3) arrays: ``np.cross`` with a fifth of its overhead on the
-    small arrays the fit evaluates tens of thousands of times."""
-    out = np.empty_like(u)
-    out[:, 0] = u[:, 1] * w[:, 2] - u[:, 2] * w[:, 1]
-    out[:, 1] = u[:, 2] * w[:, 0] - u[:, 0] * w[:, 2]
-    out[:, 2] = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-    return out
-
-
 def fit_rigid(
     obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float, *, drift: bool = False,
     max_nfev: int = 60, passes: int = 2,
@@ -215,7 +164,7 @@ def fit_rigid(
     from scipy.optimize import least_squares
 
     p0, d0 = init_structure(obs, omega0, axis0, c0, t_ref)
-    model = _Model(obs, axis0, p0, d0, t_ref, drift)
+    model = RigidModel(obs.track, obs.t_s, obs.ends_px, obs.K, axis0, p0, d0, t_ref, drift)
     x0 = np.concatenate([[omega0, 0.0, 0.0, c0[0], c0[1]], np.zeros(2 if drift else 0), np.zeros(4 * obs.n_tracks)])
     # Cauchy loss by iteratively re-weighted Levenberg-Marquardt (MINPACK follows the rate-tilt
     # valley of short arcs far faster than a trust region with a robust loss).
@@ -225,7 +174,7 @@ def fit_rigid(
     for _ in range(passes + 1):
         sw = np.sqrt(w)
         res = least_squares(lambda x, sw=sw: sw * model.residuals(x), x0,
-                            jac=lambda x, sw=sw: sw[:, None] * _jacobian(model, x),
+                            jac=lambda x, sw=sw: sw[:, None] * model.jacobian(x),
                             method="lm", x_scale="jac", max_nfev=max_nfev)  # fmt: skip
         x0 = res.x
         r = model.residuals(x0)
@@ -234,7 +183,7 @@ def fit_rigid(
     assert res is not None
     r = model.residuals(x0)
     w = 1.0 / (1.0 + (r / scale) ** 2)
-    J = _jacobian(model, x0)
+    J = model.jacobian(x0)
     n_par = J.shape[1]
     s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
     JW = J * np.sqrt(w)[:, None]
@@ -309,28 +258,6 @@ def cauchy_scale_px(residuals_px: FloatArray) -> float:
 
 def cauchy_cost(r: FloatArray, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
-
-
-def _jacobian(model: _Model, x: FloatArray) -> FloatArray:
-    """Central-difference Jacobian of the raw residuals. A line's parameters touch only its own
-    residuals, so the k-th parameter of every line is stepped at once (4 groups)."""
-    n = len(x)
-    g = model.n_global
-    m = 2 * len(model.obs.track)
-    J = np.zeros((m, n))
-    rows_track = np.repeat(model.obs.track, 2)
-    for k in range(g):
-        h = 1e-6 * max(abs(x[k]), 1e-2)
-        dx = np.zeros(n)
-        dx[k] = h
-        J[:, k] = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
-    h = 1e-6
-    for k in range(4):
-        dx = np.zeros(n)
-        dx[g + k :: 4] = h
-        col = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
-        J[np.arange(m), g + 4 * rows_track + k] = col
-    return J
 
 
 def predict_lines(fit: RigidFit, K: FloatArray, t_s: float, t_ref: float) -> FloatArray:
