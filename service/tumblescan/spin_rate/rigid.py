@@ -19,7 +19,7 @@ import numpy as np
 
 from .._typing import FloatArray, IntArray
 from ..geometry.rotations import tangent_basis
-from .rigid_model import RigidModel
+from .rigid_model import RigidModel, cross3
 from .rotation import rot
 
 
@@ -110,7 +110,7 @@ def scan_cost(
         pts = V[..., :2][:, obs.track]  # (A, O, 4, 2): two homogeneous points spanning the line
         X1 = _turn(axes, pts[..., :3, 0] * radius, w * dt) + pts[..., 3, 0, None] * c0
         X2 = _turn(axes, pts[..., :3, 1] * radius, w * dt) + pts[..., 3, 1, None] * c0
-        line = np.cross(X1 @ obs.K.T, X2 @ obs.K.T)
+        line = cross3(X1 @ obs.K.T, X2 @ obs.K.T)
         line /= np.maximum(np.linalg.norm(line[..., :2], axis=-1, keepdims=True), 1e-12)
         r = np.einsum("oki,aoi->aok", e_h, line)
         used = max(float(keep.sum()), 1.0)
@@ -123,7 +123,7 @@ def _turn(axes: FloatArray, v: FloatArray, angle: FloatArray) -> FloatArray:
     c = np.cos(angle)[None, :, None]
     s = np.sin(angle)[None, :, None]
     a = axes[:, None, :]
-    return np.asarray(v * c + np.cross(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
+    return np.asarray(v * c + cross3(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
 
 
 def init_structure(
@@ -149,7 +149,7 @@ def init_structure(
 
 def fit_rigid(
     obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float, *, drift: bool = False,
-    max_nfev: int = 60, passes: int = 2,
+    max_nfev: int = 60, passes: int = 2, uncertainty: bool = True,
 ) -> RigidFit:  # fmt: skip
     """Robust (Cauchy) least squares of the rigid model from a start; σ from the Jacobian.
 
@@ -160,6 +160,8 @@ def fit_rigid(
     c0 : (3,) starting centre with ``c0_z = 1``; t_ref : float, reference time (s).
     drift : also fit a centre velocity in the image plane.
     passes : robust passes (the second rescales the Cauchy loss to the first one's residuals).
+    uncertainty : compute σ_ω and the axis covariance; without, both are NaN (for the short fits
+        of the search and the peeling, which only rank residuals and costs).
     """
     from scipy.optimize import least_squares
 
@@ -183,7 +185,23 @@ def fit_rigid(
     assert res is not None
     r = model.residuals(x0)
     w = 1.0 / (1.0 + (r / scale) ** 2)
-    J = model.jacobian(x0)
+    omega, a, c, v, p, d = model.unpack(x0)
+    if omega < 0:  # the same motion: spin vector ω·a
+        omega, a = -omega, -a
+    sigma_omega, cov_axis = _uncertainty(model, x0, r, w) if uncertainty else (float("nan"), np.full((2, 2), np.nan))
+    return RigidFit(
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
+        weights=w, sigma_omega_rad_s=sigma_omega, cov_axis_rad2=cov_axis,
+        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
+    )  # fmt: skip
+
+
+def _uncertainty(model: RigidModel, x: FloatArray, r: FloatArray, w: FloatArray) -> tuple[float, FloatArray]:
+    """σ_ω (rad/s) and the axis tangents' covariance (2, 2) (rad²) of a converged fit at ``x``,
+    with residuals ``r`` (2·O,) px and Cauchy weights ``w`` (2·O,): the larger of the Gauss-Newton,
+    cluster-robust and track-jackknife σ."""
+    J = model.jacobian(x)
+    track = model.track
     n_par = J.shape[1]
     s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
     JW = J * np.sqrt(w)[:, None]
@@ -192,21 +210,13 @@ def fit_rigid(
     # Cluster-robust (sandwich) covariance with one cluster per track: an edge's bias (shading, PSF,
     # a neighbouring edge) persists from frame to frame, which the independent-noise σ ignores.
     # The larger of the two is reported.
-    g = np.zeros((obs.n_tracks, n_par))
-    np.add.at(g, np.repeat(obs.track, 2), J * (w * r)[:, None])
-    G = obs.n_tracks
+    G = int(track.max()) + 1
+    g = np.zeros((G, n_par))
+    np.add.at(g, np.repeat(track, 2), J * (w * r)[:, None])
     cov_cluster = H_inv @ (g.T @ g) @ H_inv * G / max(G - 1, 1)
     cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov)[:, None], cov_cluster, cov)
-    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, obs.track, model.n_global)
-    omega, a, c, v, p, d = model.unpack(x0)
-    if omega < 0:  # the same motion: spin vector ω·a
-        omega, a = -omega, -a
-    return RigidFit(
-        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
-        weights=w, sigma_omega_rad_s=max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk),
-        cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
-        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
-    )  # fmt: skip
+    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, track, model.n_global)
+    return max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk), np.asarray(cov[1:3, 1:3], dtype=float)
 
 
 def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_global: int) -> float:
@@ -229,20 +239,22 @@ def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_glo
     G = int(track.max()) + 1
     if G < 3:
         return float("inf")
+    # The pseudo-inverses are taken in two stacked calls (the same LAPACK call per matrix, without
+    # numpy's per-call overhead, which was most of this function's time).
     rows = np.repeat(track, 2)
+    sels = [rows == j for j in range(G)]
+    Jg = [JW[sel, :n_global] for sel in sels]
+    Jl = [JW[sel, n_global + 4 * j : n_global + 4 * j + 4] for j, sel in enumerate(sels)]
+    rw_j = [rw[sel] for sel in sels]
+    C_inv = np.linalg.pinv(np.array([Jl_j.T @ Jl_j for Jl_j in Jl]), rcond=1e-12, hermitian=True)
     S_parts, s_parts = [], []
     for j in range(G):
-        sel = rows == j
-        Jg = JW[sel, :n_global]
-        Jl = JW[sel, n_global + 4 * j : n_global + 4 * j + 4]
-        C_inv = np.linalg.pinv(Jl.T @ Jl, rcond=1e-12, hermitian=True)
-        B = Jg.T @ Jl
-        S_parts.append(Jg.T @ Jg - B @ C_inv @ B.T)
-        s_parts.append(Jg.T @ rw[sel] - B @ C_inv @ (Jl.T @ rw[sel]))
+        B = Jg[j].T @ Jl[j]
+        S_parts.append(Jg[j].T @ Jg[j] - B @ C_inv[j] @ B.T)
+        s_parts.append(Jg[j].T @ rw_j[j] - B @ C_inv[j] @ (Jl[j].T @ rw_j[j]))
     S = np.sum(S_parts, axis=0)
-    delta = np.array(
-        [np.linalg.pinv(S - Sj, rcond=1e-10, hermitian=True)[0] @ sj for Sj, sj in zip(S_parts, s_parts, strict=True)]
-    )
+    S_without = np.linalg.pinv(S - np.array(S_parts), rcond=1e-10, hermitian=True)  # (G, n_global, n_global)
+    delta = np.array([S_without[j][0] @ s_parts[j] for j in range(G)])
     return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
 
 

@@ -87,10 +87,10 @@ class RigidModel:
         l12 = np.zeros_like(line)
         l12[:, :2] = line[:, :2] / s[:, None]
         g = (self.e_h - r[:, :, None] * l12[:, None, :]) / s[:, None, None]  # (O, 2, 3)
-        alpha = _cross(w[:, None, :], g) @ self.K  # Kᵀ (w × g), row-wise: (O, 2, 3)
-        beta = _cross(g, u[:, None, :]) @ self.K
+        alpha = cross3(w[:, None, :], g) @ self.K  # Kᵀ (w × g), row-wise: (O, 2, 3)
+        beta = cross3(g, u[:, None, :]) @ self.K
         # α·(δ × R p) + β·(δ × R d) = δ·m with m = R p × α + R d × β: one m for the 3 rotation columns.
-        m = _cross(Rp[:, None, :], alpha) + _cross(Rd[:, None, :], beta)  # (O, 2, 3)
+        m = cross3(Rp[:, None, :], alpha) + cross3(Rd[:, None, :], beta)  # (O, 2, 3)
         J = np.zeros((2 * n_obs, self.n_global + 4 * len(self.p0)))
         dt = self.dt[:, None]
         J[:, 0] = (np.einsum("oki,i->ok", m, a) * dt).ravel()
@@ -120,7 +120,7 @@ class RigidModel:
         return J
 
 
-def _cross(u: FloatArray, w: FloatArray) -> FloatArray:
+def cross3(u: FloatArray, w: FloatArray) -> FloatArray:
     """``u × w`` over the last axis, broadcast (``np.cross`` at a fraction of its overhead)."""
     u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
     w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
