@@ -167,6 +167,7 @@ def main() -> None:
     ap.add_argument("--static", type=int, default=5)
     ap.add_argument("--workers", type=int, default=2, help="rendering and estimating processes")
     ap.add_argument("--geometries", nargs="*", default=list(GEOMETRIES))
+    ap.add_argument("--methods", nargs="*", default=["ours", "paper"], help="methods run on the spinning targets (statics: ours)")
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     cache = OUT / f"spin_cache_{args.width}"
@@ -180,7 +181,7 @@ def main() -> None:
         (cache / f"{g}_{seed}_{noise}", method)
         for g, seed, _, _ in jobs
         for noise in ("clean", "noisy")
-        for method in (("ours", "paper") if g != "static" else ("ours",))
+        for method in (args.methods if g != "static" else ("ours",))
     ]
     rows: list[dict[str, Any]] = []
     (OUT / "spin_from_images.rows.jsonl").unlink(missing_ok=True)
