@@ -167,7 +167,7 @@ def main() -> None:
     ap.add_argument("--static", type=int, default=5)
     ap.add_argument("--workers", type=int, default=2, help="rendering and estimating processes")
     ap.add_argument("--geometries", nargs="*", default=list(GEOMETRIES))
-    ap.add_argument("--methods", nargs="*", default=["ours", "paper"], help="methods run on the spinning targets (statics: ours)")
+    ap.add_argument("--methods", nargs="*", default=["ours", "paper"], help="methods on spinning targets")
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     cache = OUT / f"spin_cache_{args.width}"
