@@ -73,6 +73,12 @@ def tangent_basis(a: Array) -> tuple[Array, Array]:
     ``e2 = a × e1`` (a right-handed frame ``e1, e2, a``). ``e1`` is ``a`` crossed with whichever
     coordinate axis is farther from it, so it is defined for every ``a``."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(a, helper)
+    e1 = _cross_1d(a, helper)
     e1 = e1 / np.linalg.norm(e1)
-    return e1, np.cross(a, e1)
+    return e1, _cross_1d(a, e1)
+
+
+def _cross_1d(u: Array, w: Array) -> Array:
+    """``u × w`` of two (3,) vectors: ``np.cross``'s arithmetic without its overhead, most of the
+    cost for one vector (the spin fit builds thousands of tangent bases)."""
+    return np.array([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]])

@@ -53,7 +53,17 @@ def reject_outliers(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[Obs
         if len(np.unique(obs.track[keep])) < 2:
             break
         obs = subset(obs, keep)
-        fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift, max_nfev=PEEL_NFEV, passes=1)
+        fit = fit_rigid(
+            obs,
+            fit.omega_rad_s,
+            fit.axis,
+            fit.c0,
+            t_ref,
+            drift=fit.drift,
+            max_nfev=PEEL_NFEV,
+            passes=1,
+            uncertainty=False,
+        )
         peeled = True
     if peeled:  # the short refits of the peeling only rank residuals; the kept tracks get a full fit
         fit = fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)

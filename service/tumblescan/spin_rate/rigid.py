@@ -19,6 +19,7 @@ import numpy as np
 
 from .._typing import FloatArray, IntArray
 from ..geometry.rotations import tangent_basis
+from .rigid_model import RigidModel, cross3
 from .rotation import rot
 
 
@@ -109,7 +110,7 @@ def scan_cost(
         pts = V[..., :2][:, obs.track]  # (A, O, 4, 2): two homogeneous points spanning the line
         X1 = _turn(axes, pts[..., :3, 0] * radius, w * dt) + pts[..., 3, 0, None] * c0
         X2 = _turn(axes, pts[..., :3, 1] * radius, w * dt) + pts[..., 3, 1, None] * c0
-        line = np.cross(X1 @ obs.K.T, X2 @ obs.K.T)
+        line = cross3(X1 @ obs.K.T, X2 @ obs.K.T)
         line /= np.maximum(np.linalg.norm(line[..., :2], axis=-1, keepdims=True), 1e-12)
         r = np.einsum("oki,aoi->aok", e_h, line)
         used = max(float(keep.sum()), 1.0)
@@ -122,7 +123,7 @@ def _turn(axes: FloatArray, v: FloatArray, angle: FloatArray) -> FloatArray:
     c = np.cos(angle)[None, :, None]
     s = np.sin(angle)[None, :, None]
     a = axes[:, None, :]
-    return np.asarray(v * c + np.cross(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
+    return np.asarray(v * c + cross3(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
 
 
 def init_structure(
@@ -146,61 +147,9 @@ def init_structure(
     return np.array(P), np.array(D)
 
 
-class _Model:
-    """Parameter packing and residuals of the rigid model."""
-
-    def __init__(
-        self, obs: Observations, axis0: FloatArray, p0: FloatArray, d0: FloatArray, t_ref: float, drift: bool
-    ) -> None:
-        self.obs, self.t_ref, self.drift = obs, t_ref, drift
-        self.axis0 = axis0
-        self.e_axis = tangent_basis(axis0)
-        self.p0, self.d0 = p0, d0
-        self.f = np.array([np.column_stack(tangent_basis(d)) for d in d0])  # (T, 3, 2)
-        self.n_global = 5 + (2 if drift else 0)
-        # One rotation per frame, not per observation: every line of a frame shares its time, and
-        # the residuals are evaluated some 20 times per Jacobian.
-        self.dt = obs.t_s - t_ref
-        self.dt_frame, self.frame_of = np.unique(self.dt, return_inverse=True)
-        e = obs.ends_px
-        self.e_h = np.concatenate([e, np.ones((*e.shape[:2], 1))], axis=2)  # (O, 2, 3)
-
-    def unpack(self, x: FloatArray) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        omega = float(x[0])
-        a = self.axis0 + x[1] * self.e_axis[0] + x[2] * self.e_axis[1]
-        a = a / np.linalg.norm(a)
-        c0 = np.array([x[3], x[4], 1.0])
-        v = np.array([x[5], x[6], 0.0]) if self.drift else np.zeros(3)
-        L = x[self.n_global :].reshape(-1, 4)
-        d = self.d0 + np.einsum("tij,tj->ti", self.f, L[:, :2])
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        p = self.p0 + np.einsum("tij,tj->ti", self.f, L[:, 2:])
-        return omega, a, c0, v, p, d
-
-    def residuals(self, x: FloatArray) -> FloatArray:
-        omega, a, c0, v, p, d = self.unpack(x)
-        o = self.obs
-        R = rot(a, omega * self.dt_frame)[self.frame_of]
-        X = c0 + v * self.dt[:, None] + np.einsum("oij,oj->oi", R, p[o.track])
-        D = np.einsum("oij,oj->oi", R, d[o.track])
-        line = _cross_rows(X @ o.K.T, D @ o.K.T)
-        line = line / np.sqrt(line[:, 0] * line[:, 0] + line[:, 1] * line[:, 1])[:, None]
-        return np.asarray(np.einsum("oki,oi->ok", self.e_h, line).ravel(), dtype=float)
-
-
-def _cross_rows(u: FloatArray, w: FloatArray) -> FloatArray:
-    """Row-wise ``u × w`` for (N, 3) arrays: ``np.cross`` with a fifth of its overhead on the
-    small arrays the fit evaluates tens of thousands of times."""
-    out = np.empty_like(u)
-    out[:, 0] = u[:, 1] * w[:, 2] - u[:, 2] * w[:, 1]
-    out[:, 1] = u[:, 2] * w[:, 0] - u[:, 0] * w[:, 2]
-    out[:, 2] = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-    return out
-
-
 def fit_rigid(
     obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float, *, drift: bool = False,
-    max_nfev: int = 60, passes: int = 2,
+    max_nfev: int = 60, passes: int = 2, uncertainty: bool = True,
 ) -> RigidFit:  # fmt: skip
     """Robust (Cauchy) least squares of the rigid model from a start; σ from the Jacobian.
 
@@ -211,11 +160,13 @@ def fit_rigid(
     c0 : (3,) starting centre with ``c0_z = 1``; t_ref : float, reference time (s).
     drift : also fit a centre velocity in the image plane.
     passes : robust passes (the second rescales the Cauchy loss to the first one's residuals).
+    uncertainty : compute σ_ω and the axis covariance; without, both are NaN (for the short fits
+        of the search and the peeling, which only rank residuals and costs).
     """
     from scipy.optimize import least_squares
 
     p0, d0 = init_structure(obs, omega0, axis0, c0, t_ref)
-    model = _Model(obs, axis0, p0, d0, t_ref, drift)
+    model = RigidModel(obs.track, obs.t_s, obs.ends_px, obs.K, axis0, p0, d0, t_ref, drift)
     x0 = np.concatenate([[omega0, 0.0, 0.0, c0[0], c0[1]], np.zeros(2 if drift else 0), np.zeros(4 * obs.n_tracks)])
     # Cauchy loss by iteratively re-weighted Levenberg-Marquardt (MINPACK follows the rate-tilt
     # valley of short arcs far faster than a trust region with a robust loss).
@@ -225,7 +176,7 @@ def fit_rigid(
     for _ in range(passes + 1):
         sw = np.sqrt(w)
         res = least_squares(lambda x, sw=sw: sw * model.residuals(x), x0,
-                            jac=lambda x, sw=sw: sw[:, None] * _jacobian(model, x),
+                            jac=lambda x, sw=sw: sw[:, None] * model.jacobian(x),
                             method="lm", x_scale="jac", max_nfev=max_nfev)  # fmt: skip
         x0 = res.x
         r = model.residuals(x0)
@@ -234,7 +185,23 @@ def fit_rigid(
     assert res is not None
     r = model.residuals(x0)
     w = 1.0 / (1.0 + (r / scale) ** 2)
-    J = _jacobian(model, x0)
+    omega, a, c, v, p, d = model.unpack(x0)
+    if omega < 0:  # the same motion: spin vector ω·a
+        omega, a = -omega, -a
+    sigma_omega, cov_axis = _uncertainty(model, x0, r, w) if uncertainty else (float("nan"), np.full((2, 2), np.nan))
+    return RigidFit(
+        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
+        weights=w, sigma_omega_rad_s=sigma_omega, cov_axis_rad2=cov_axis,
+        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
+    )  # fmt: skip
+
+
+def _uncertainty(model: RigidModel, x: FloatArray, r: FloatArray, w: FloatArray) -> tuple[float, FloatArray]:
+    """σ_ω (rad/s) and the axis tangents' covariance (2, 2) (rad²) of a converged fit at ``x``,
+    with residuals ``r`` (2·O,) px and Cauchy weights ``w`` (2·O,): the larger of the Gauss-Newton,
+    cluster-robust and track-jackknife σ."""
+    J = model.jacobian(x)
+    track = model.track
     n_par = J.shape[1]
     s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
     JW = J * np.sqrt(w)[:, None]
@@ -243,21 +210,13 @@ def fit_rigid(
     # Cluster-robust (sandwich) covariance with one cluster per track: an edge's bias (shading, PSF,
     # a neighbouring edge) persists from frame to frame, which the independent-noise σ ignores.
     # The larger of the two is reported.
-    g = np.zeros((obs.n_tracks, n_par))
-    np.add.at(g, np.repeat(obs.track, 2), J * (w * r)[:, None])
-    G = obs.n_tracks
+    G = int(track.max()) + 1
+    g = np.zeros((G, n_par))
+    np.add.at(g, np.repeat(track, 2), J * (w * r)[:, None])
     cov_cluster = H_inv @ (g.T @ g) @ H_inv * G / max(G - 1, 1)
     cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov)[:, None], cov_cluster, cov)
-    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, obs.track, model.n_global)
-    omega, a, c, v, p, d = model.unpack(x0)
-    if omega < 0:  # the same motion: spin vector ω·a
-        omega, a = -omega, -a
-    return RigidFit(
-        omega_rad_s=omega, axis=a, c0=c, velocity=v, lines_p=p, lines_d=d, cost=cauchy_cost(r, scale), residuals_px=r,
-        weights=w, sigma_omega_rad_s=max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk),
-        cov_axis_rad2=np.asarray(cov[1:3, 1:3], dtype=float),
-        rms_px=float(np.sqrt(np.sum(w * r**2) / max(np.sum(w), 1e-9))), success=bool(res.success), drift=drift,
-    )  # fmt: skip
+    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, track, model.n_global)
+    return max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk), np.asarray(cov[1:3, 1:3], dtype=float)
 
 
 def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_global: int) -> float:
@@ -280,20 +239,22 @@ def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_glo
     G = int(track.max()) + 1
     if G < 3:
         return float("inf")
+    # The pseudo-inverses are taken in two stacked calls (the same LAPACK call per matrix, without
+    # numpy's per-call overhead, which was most of this function's time).
     rows = np.repeat(track, 2)
+    sels = [rows == j for j in range(G)]
+    Jg = [JW[sel, :n_global] for sel in sels]
+    Jl = [JW[sel, n_global + 4 * j : n_global + 4 * j + 4] for j, sel in enumerate(sels)]
+    rw_j = [rw[sel] for sel in sels]
+    C_inv = np.linalg.pinv(np.array([Jl_j.T @ Jl_j for Jl_j in Jl]), rcond=1e-12, hermitian=True)
     S_parts, s_parts = [], []
     for j in range(G):
-        sel = rows == j
-        Jg = JW[sel, :n_global]
-        Jl = JW[sel, n_global + 4 * j : n_global + 4 * j + 4]
-        C_inv = np.linalg.pinv(Jl.T @ Jl, rcond=1e-12, hermitian=True)
-        B = Jg.T @ Jl
-        S_parts.append(Jg.T @ Jg - B @ C_inv @ B.T)
-        s_parts.append(Jg.T @ rw[sel] - B @ C_inv @ (Jl.T @ rw[sel]))
+        B = Jg[j].T @ Jl[j]
+        S_parts.append(Jg[j].T @ Jg[j] - B @ C_inv[j] @ B.T)
+        s_parts.append(Jg[j].T @ rw_j[j] - B @ C_inv[j] @ (Jl[j].T @ rw_j[j]))
     S = np.sum(S_parts, axis=0)
-    delta = np.array(
-        [np.linalg.pinv(S - Sj, rcond=1e-10, hermitian=True)[0] @ sj for Sj, sj in zip(S_parts, s_parts, strict=True)]
-    )
+    S_without = np.linalg.pinv(S - np.array(S_parts), rcond=1e-10, hermitian=True)  # (G, n_global, n_global)
+    delta = np.array([S_without[j][0] @ s_parts[j] for j in range(G)])
     return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
 
 
@@ -309,28 +270,6 @@ def cauchy_scale_px(residuals_px: FloatArray) -> float:
 
 def cauchy_cost(r: FloatArray, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
-
-
-def _jacobian(model: _Model, x: FloatArray) -> FloatArray:
-    """Central-difference Jacobian of the raw residuals. A line's parameters touch only its own
-    residuals, so the k-th parameter of every line is stepped at once (4 groups)."""
-    n = len(x)
-    g = model.n_global
-    m = 2 * len(model.obs.track)
-    J = np.zeros((m, n))
-    rows_track = np.repeat(model.obs.track, 2)
-    for k in range(g):
-        h = 1e-6 * max(abs(x[k]), 1e-2)
-        dx = np.zeros(n)
-        dx[k] = h
-        J[:, k] = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
-    h = 1e-6
-    for k in range(4):
-        dx = np.zeros(n)
-        dx[g + k :: 4] = h
-        col = (model.residuals(x + dx) - model.residuals(x - dx)) / (2 * h)
-        J[np.arange(m), g + 4 * rows_track + k] = col
-    return J
 
 
 def predict_lines(fit: RigidFit, K: FloatArray, t_s: float, t_ref: float) -> FloatArray:

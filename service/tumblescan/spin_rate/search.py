@@ -196,10 +196,8 @@ def best_of_starts(
     at ``RATE_FACTORS`` times its rate (inside ``[w_lo, w_hi]``), each with the best axis of the
     scan at that rate. The ``FINALISTS`` best distinct short fits (common-scale cost) are carried to
     convergence, then the best one's weak-perspective twin, and the lowest converged cost wins."""
-    trials = [fit_rigid(obs, w0, a0, cc, t_ref, max_nfev=SHORT_NFEV, passes=1) for w0, a0, cc in starts]
-    trials += [
-        fit_rigid(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref, max_nfev=SHORT_NFEV, passes=1) for f in trials
-    ]
+    trials = [_short_fit(obs, w0, a0, cc, t_ref) for w0, a0, cc in starts]
+    trials += [_short_fit(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref) for f in trials]
     lead = trials[int(np.argmin(common_costs(trials, radius, centre)))]
     scan_obs = scan_subset(obs)
     axes = fibonacci_sphere(SCAN_AXES)
@@ -209,7 +207,7 @@ def best_of_starts(
             continue
         C = scan_cost(scan_obs, np.array([w]), axes, lead.c0, t_ref, radius, clip_px=SCAN_CLIP_PX)[0]
         for a0 in (lead.axis, axes[int(np.argmin(C))]):
-            trials.append(fit_rigid(obs, w, a0, lead.c0, t_ref, max_nfev=SHORT_NFEV, passes=1))
+            trials.append(_short_fit(obs, w, a0, lead.c0, t_ref))
     # A short fit ranks basins only roughly (the one nearer its minimum after SHORT_NFEV steps looks
     # better): the best few distinct ones are carried to convergence and compared again.
     order = np.argsort(common_costs(trials, radius, centre))
@@ -222,9 +220,19 @@ def best_of_starts(
     done = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref) for f in finalists]
     best = done[int(np.argmin(common_costs(done, radius, centre)))]
     # The winner's weak-perspective twin, started from the converged rate: a short fit's twin was
-    # taken from a rate and axis still far off, and so may have missed the twin basin.
-    done.append(fit_rigid(obs, best.omega_rad_s, mirror_twin(best.axis), best.c0, t_ref))
+    # taken from a rate and axis still far off, and so may have missed the twin basin. Not when
+    # another finalist already converged in that basin: the refit would only find it again
+    # (measured: the same rate and cost to the printed digits).
+    twin_axis = mirror_twin(best.axis)
+    others = [f for f in done if f is not best]
+    if not any(f.success and _near(f.omega_rad_s, f.axis, best.omega_rad_s, twin_axis) for f in others):
+        done.append(fit_rigid(obs, best.omega_rad_s, twin_axis, best.c0, t_ref))
     return done[int(np.argmin(common_costs(done, radius, centre)))]
+
+
+def _short_fit(obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float) -> RigidFit:
+    """A fit carried ``SHORT_NFEV`` steps, one robust pass, without σ: it only ranks basins."""
+    return fit_rigid(obs, omega0, axis0, c0, t_ref, max_nfev=SHORT_NFEV, passes=1, uncertainty=False)
 
 
 def best_of_starts_without_strays(
@@ -243,10 +251,14 @@ def best_of_starts_without_strays(
 
 
 def _same_basin(a: RigidFit, b: RigidFit) -> bool:
-    """Whether two fits sit in one basin: rates within ``SAME_RATE_REL`` and axes (with sense)
-    within ``SAME_AXIS_DEG``."""
-    same_rate = abs(a.omega_rad_s - b.omega_rad_s) <= SAME_RATE_REL * max(a.omega_rad_s, b.omega_rad_s)
-    return same_rate and float(a.axis @ b.axis) >= np.cos(np.radians(SAME_AXIS_DEG))
+    """Whether two fits sit in one basin (``_near``)."""
+    return _near(a.omega_rad_s, a.axis, b.omega_rad_s, b.axis)
+
+
+def _near(omega_a: float, axis_a: FloatArray, omega_b: float, axis_b: FloatArray) -> bool:
+    """Rates (rad/s) within ``SAME_RATE_REL`` and unit axes (with sense) within ``SAME_AXIS_DEG``."""
+    same_rate = abs(omega_a - omega_b) <= SAME_RATE_REL * max(omega_a, omega_b)
+    return same_rate and float(axis_a @ axis_b) >= np.cos(np.radians(SAME_AXIS_DEG))
 
 
 def with_drift_if_needed(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
