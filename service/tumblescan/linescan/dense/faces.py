@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
 
@@ -156,3 +157,67 @@ def beside_face(
     worst = np.zeros(len(nb))
     np.maximum.at(worst, c, z2)
     return np.asarray(ok & (worst <= BESIDE_MAX_SIGMAS**2))
+
+
+def assign_to_faces(
+    neighbours: IntArray,
+    cell: IntArray,
+    mapped_m: FloatArray,
+    mean_m: FloatArray,
+    normal_ref: FloatArray,
+    var_m2: FloatArray,
+    tilt_var_rad2: FloatArray,
+    count: FloatArray,
+    candidate: NDArray[np.bool_],
+    give: NDArray[np.bool_],
+    face: NDArray[np.bool_],
+) -> IntArray:
+    """Each point's cell ``(n,)``, with the points of the ``give`` cells among the ``candidate``
+    ones (not on one face: across an edge) handed to the neighbouring ``face`` cell on whose
+    plane they lie.
+
+    A point ``p`` (``mapped_m`` at ``T``) of a candidate cell lies on the plane of a
+    neighbour ``k`` inside a face when
+    ``z^2 = (n_k . (p - c_k))^2 / (v_k (1 + 1 / N_k) + t_k |p - c_k|_perp^2) <= BESIDE_MAX_SIGMAS^2``
+    (the point's noise along ``n_k``, the plane's offset and its tilt ``t_k`` over the in-plane
+    offset: ``var_m2``, ``count``, ``tilt_var_rad2`` of ``k``). It goes to the one with the
+    least ``z``, unless
+
+    - a neighbour of another face (normals apart by more than :func:`_tolerance`) has its plane
+      within ``BESIDE_MAX_SIGMAS`` of the point too: near the edge's line a point lies on both
+      planes, and handing it to the nearer one would pick its noise's sign;
+    - a point on no neighbour's plane (another surface, whose own cells are not planar: a face
+      seen edge-on, a boom) lies within ``BESIDE_MAX_SIGMAS`` sigmas ``sqrt(v_k)`` of it: that
+      surface's points near the edge lie within the sigmas of the plane as well.
+
+    So the points of either face of a cell that straddles an edge join their face's surfel,
+    the band along the edge where the faces cannot be told apart stays out, and points on no
+    plane stay in their cell, which is not planar.
+    """
+    point_cell = cell.copy()
+    pts = np.flatnonzero(candidate[cell])
+    if len(pts) == 0:
+        return point_cell
+    nb = neighbours[cell[pts]]
+    safe = np.where(nb >= 0, nb, 0)
+    valid = (nb >= 0) & face[safe]
+    offset = mapped_m[pts, None, :] - mean_m[safe]  # (p, 8, 3)
+    d = np.einsum("nki,nki->nk", normal_ref[safe], offset)
+    in_plane2 = np.einsum("nki,nki->nk", offset, offset) - d**2
+    z2 = d**2 / (var_m2[safe] * (1 + 1 / count[safe]) + tilt_var_rad2[safe] * in_plane2)
+    z2 = np.where(valid, z2, np.inf)
+    rows = np.arange(len(pts))
+    best = np.argmin(z2, axis=1)
+    k = safe[rows, best]
+    cos = np.abs(np.einsum("ni,nki->nk", normal_ref[k], normal_ref[safe]))
+    other_face = cos <= np.cos(_tolerance(tilt_var_rad2[k][:, None], tilt_var_rad2[safe]))
+    gate = BESIDE_MAX_SIGMAS**2
+    on_plane = z2[rows, best] <= gate
+    take = on_plane & ~np.any((z2 <= gate) & other_face, axis=1) & give[cell[pts]]
+    off = ~on_plane
+    if np.any(off) and np.any(take):
+        reach = BESIDE_MAX_SIGMAS * np.sqrt(var_m2[k[take]])
+        dist, _ = cKDTree(mapped_m[pts[off]]).query(mapped_m[pts[take]], distance_upper_bound=float(reach.max()))
+        take[take] = dist > reach
+    point_cell[pts[take]] = k[take]
+    return point_cell
