@@ -388,7 +388,6 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         var / np.maximum(pooled_spread, 1e-300),
         count,
         ~planar,
-        ~planar,
         planar,
     )
     moved = point_cell != data.cell
