@@ -212,18 +212,26 @@ def assign_to_faces(
     pts = np.flatnonzero(compact[cell] >= 0)
     ci = compact[cell[pts]]
     z2 = np.full((len(pts), 8), np.inf)
+    in_plane2 = np.full((len(pts), 8), np.inf)
     for j in range(8):
         on = np.flatnonzero(valid[ci, j])
         cj = ci[on]
         offset = mapped_m[pts[on]] - c_k[cj, j]
         d = np.einsum("ni,ni->n", offset, n_k[cj, j])
-        z2[on, j] = d**2 / (v_k[cj, j] + t_k[cj, j] * (np.einsum("ni,ni->n", offset, offset) - d**2))
+        in_plane2[on, j] = np.einsum("ni,ni->n", offset, offset) - d**2
+        z2[on, j] = d**2 / (v_k[cj, j] + t_k[cj, j] * in_plane2[on, j])
     rows = np.arange(len(pts))
     best = np.argmin(z2, axis=1)
     gate = BESIDE_MAX_SIGMAS**2
+    # The face is the one whose plane fits; the surfel of that face the nearest along it, and
+    # the point is taken when it lies on that surfel's plane. The best-fitting of the face's
+    # surfels would sort the points by the sign of their noise (their planes differ by their
+    # own noise): on the folded wall the centroids of the surfels that took points in were 4
+    # standard errors off their face (rms), against 1.0 elsewhere.
+    recv = np.argmin(np.where(apart[ci, best], np.inf, in_plane2), axis=1)
     on_plane = z2[rows, best] <= gate
-    take = on_plane & ~np.any((z2 <= gate) & apart[ci, best], axis=1)
-    k = nb[ci, best]
+    take = (z2[rows, recv] <= gate) & ~np.any((z2 <= gate) & apart[ci, recv], axis=1)
+    k = nb[ci, recv]
     if not np.any(take):
         return point_cell
     # Points on no neighbour's plane, of every frame: another frame cuts the edge elsewhere, or
