@@ -387,7 +387,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         var,
         var / np.maximum(pooled_spread, 1e-300),
         count,
-        ~planar,
+        data.interior & ~planar,
         planar,
     )
     moved = point_cell != data.cell
