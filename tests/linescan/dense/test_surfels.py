@@ -164,12 +164,13 @@ def test_cells_beside_the_edges_of_narrow_faces_are_used_and_cells_across_them_a
 
 
 def test_points_of_cells_across_edges_join_the_surfels_of_their_faces() -> None:
-    # The cells that straddle the folded wall's edges, and those on the view's border, hand
-    # each point to a neighbouring surfel of the face on whose plane it lies; the band along
-    # an edge where both planes fit stays out. The planar surfels then hold over 90 % of the
-    # points (75 % before), and the centroids of the surfels that took points in stay on their
-    # face: taking each point to the best-fitting surfel of its face sorted the points by
-    # the sign of their noise, and put those centroids 4 standard errors (rms) off their face.
+    # The cells that straddle the folded wall's edges hand each point to a neighbouring surfel
+    # of the face on whose plane it lies; the band along an edge where both planes fit stays
+    # out. The planar surfels then hold 83 % of the points (75 % before; the cells on the
+    # view's border are not interior and hand nothing over), and the centroids of the surfels
+    # that took points in stay on their face: taking each point to the best-fitting surfel of
+    # its face sorted the points by the sign of their noise, and put those centroids 4
+    # standard errors (rms) off their face.
     xyz, tau, face = _folded_wall(seed=6)
     data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=0.3)
     x = np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0])
@@ -180,7 +181,7 @@ def test_points_of_cells_across_edges_join_the_surfels_of_their_faces() -> None:
     assert not np.any(surf.planar & mixed)
     used = surf.planar[surf.point_cell]
     moved = surf.point_cell != data.cell
-    assert used.mean() > 0.9
+    assert used.mean() > 0.8
     assert np.all(used[moved])
     assert moved[mixed[data.cell]].mean() > 0.4  # of the points of the cells across edges
     # A point handed to a surfel of another face is the noise's far tail: more than
@@ -188,7 +189,7 @@ def test_points_of_cells_across_edges_join_the_surfels_of_their_faces() -> None:
     # them of this one, as likely as any of the face's own points.
     own_face = np.argmax(per_face, axis=1)
     stray = moved & (face != own_face[surf.point_cell])
-    assert np.count_nonzero(stray) < 0.006 * np.count_nonzero(moved)
+    assert np.count_nonzero(stray) < 0.01 * np.count_nonzero(moved)
     k = surf.point_cell[stray]
     off_m = np.einsum("ni,ni->n", xyz[stray] - surf.anchor_obs[k], surf.normal_obs[k])
     assert np.all(np.abs(off_m) < BESIDE_MAX_SIGMAS * np.sqrt(surf.var_m2[k]))
