@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
 from tumblescan.linescan.dense.surfels import SPURIOUS_MIN_SHARE, LineMapping, build_surfels, prepare
 from tumblescan.linescan.sensor import SensorNoise
 
@@ -120,23 +121,26 @@ def test_a_thin_boom_in_front_of_a_wall_is_not_taken_for_spurious_returns() -> N
     assert data.spurious == 0
 
 
+FOLD_WIDTH_M, FOLD_ANGLE_DEG = 2.4, 22.5  # each face's tilt from the wall: edges of 45 deg
+
+
+def _fold_height_m(x_m: np.ndarray) -> np.ndarray:
+    """Height of the folded wall (above z = 50 m) at ``x_m``: ridges and valleys in turn."""
+    phase = np.mod(x_m + FOLD_WIDTH_M / 2, 2 * FOLD_WIDTH_M) - FOLD_WIDTH_M
+    return np.asarray(np.tan(np.radians(FOLD_ANGLE_DEG)) * (np.abs(phase) - FOLD_WIDTH_M / 2))
+
+
 def _folded_wall(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Faces 2.4 m wide (8 cells of 0.3 m) folded at 45 deg edges, ridges and valleys in turn, at
     50 m (as the octagonal bus's sides): the points with Table 1 noise, their lines and the face
     each lies on."""
     az, el = np.meshgrid(np.radians(np.linspace(-6, 6, 400)), np.radians(np.linspace(-3, 3, 200)), indexing="ij")
     d = np.stack([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)], axis=-1).reshape(-1, 3)
-    width_m, slope = 2.4, np.tan(np.radians(22.5))
-
-    def height_m(x_m: np.ndarray) -> np.ndarray:
-        phase = np.mod(x_m + width_m / 2, 2 * width_m) - width_m
-        return np.asarray(slope * (np.abs(phase) - width_m / 2))
-
     range_m = np.full(len(d), 50.0)
     for _ in range(30):  # the ray meets z = 50 + height(x); a contraction (slope x 0.1)
-        range_m = (50.0 + height_m(range_m * d[:, 0])) / d[:, 2]
+        range_m = (50.0 + _fold_height_m(range_m * d[:, 0])) / d[:, 2]
     clean = d * range_m[:, None]
-    face = np.floor((clean[:, 0] + width_m / 2) / width_m).astype(np.int64)
+    face = np.floor((clean[:, 0] + FOLD_WIDTH_M / 2) / FOLD_WIDTH_M).astype(np.int64)
     tau = np.repeat(np.arange(400) * 1e-3, 200)
     return NOISE.sample(clean, np.random.default_rng(seed)), tau, face - face.min()
 
@@ -157,3 +161,45 @@ def test_cells_beside_the_edges_of_narrow_faces_are_used_and_cells_across_them_a
     assert not np.any(surf.planar & mixed)
     # The cells left out: the edge's own, and the view's border (not interior).
     assert count[surf.planar].sum() / count.sum() > 0.72
+
+
+def test_points_of_cells_across_edges_join_the_surfels_of_their_faces() -> None:
+    # The cells that straddle the folded wall's edges hand each point to a neighbouring surfel
+    # of the face on whose plane it lies; the band along an edge where both planes fit stays
+    # out. The planar surfels then hold 83 % of the points (75 % before; the cells on the
+    # view's border are not interior and hand nothing over), and the centroids of the surfels
+    # that took points in stay on their face: taking each point to the best-fitting surfel of
+    # its face sorted the points by the sign of their noise, and put those centroids 4
+    # standard errors (rms) off their face.
+    xyz, tau, face = _folded_wall(seed=6)
+    data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=0.3)
+    x = np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0])
+    surf = build_surfels(data, LineMapping(x, data.tau_s, tuple(range(9))), NOISE)
+    per_face = np.zeros((len(data.cell_frame), face.max() + 1))
+    np.add.at(per_face, (data.cell, face), 1)
+    mixed = np.count_nonzero(per_face, axis=1) > 1
+    assert not np.any(surf.planar & mixed)
+    used = surf.planar[surf.point_cell]
+    moved = surf.point_cell != data.cell
+    assert used.mean() > 0.8
+    assert np.all(used[moved])
+    assert moved[mixed[data.cell]].mean() > 0.4  # of the points of the cells across edges
+    # A point handed to a surfel of another face is the noise's far tail: more than
+    # BESIDE_MAX_SIGMAS off its own plane (else it lies on both, and stays out) and within
+    # them of this one, as likely as any of the face's own points.
+    own_face = np.argmax(per_face, axis=1)
+    stray = moved & (face != own_face[surf.point_cell])
+    assert np.count_nonzero(stray) < 0.01 * np.count_nonzero(moved)
+    k = surf.point_cell[stray]
+    off_m = np.einsum("ni,ni->n", xyz[stray] - surf.anchor_obs[k], surf.normal_obs[k])
+    assert np.all(np.abs(off_m) < BESIDE_MAX_SIGMAS * np.sqrt(surf.var_m2[k]))
+    # Centroids off the wall, in their standard errors: those that took points in as the rest.
+    centre = surf.anchor_obs
+    off_wall_m = (centre[:, 2] - 50.0 - _fold_height_m(centre[:, 0])) * np.cos(np.radians(FOLD_ANGLE_DEG))
+    z = off_wall_m / np.sqrt(surf.var_m2 / np.maximum(surf.count, 1))
+    gained = np.zeros(len(z), dtype=bool)
+    gained[surf.point_cell[moved]] = True
+    rms_gained = float(np.sqrt(np.mean(z[gained & surf.planar] ** 2)))
+    rms_rest = float(np.sqrt(np.mean(z[~gained & surf.planar] ** 2)))
+    assert rms_gained < 1.5 and rms_rest < 1.2, (rms_gained, rms_rest)
+    assert abs(float(np.mean(z[gained & surf.planar]))) < 0.3

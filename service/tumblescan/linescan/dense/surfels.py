@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 from ..sensor import SensorNoise, azimuth_elevation
-from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, beside_face, flat_cells, inside_face
+from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, assign_to_faces, beside_face, flat_cells, inside_face
 from .returns import range_inliers
 
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
@@ -291,34 +291,39 @@ class Surfels:
     var_m2: FloatArray
     normal_var_rad2: FloatArray
     mapping: LineMapping  # the motion they were built with
+    # Each point's surfel ``(n,)``: its cell, or the neighbour on whose face it lies when its
+    # own cell straddles an edge (:func:`~.faces.assign_to_faces`).
+    point_cell: IntArray
 
 
-def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
-    """Moments of each cell's points mapped to ``T``: centroid, and normal from the scatter less the sensor's."""
-    m = len(data.cell_frame)
-    origin = mapping.center
-    mapped = mapping.apply(data.xyz_m, data.line) - origin
-    count = np.bincount(data.cell, minlength=m).astype(float)
+def _cell_moments(
+    data: DenseData, mapped: FloatArray, cell: IntArray, m: int
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray]:
+    """Count ``(m,)``, centroid ``(m, 3)`` and scatter ``(m, 3, 3)`` of each cell's points
+    ``mapped`` (at ``T``, less the centre), and the line nearest their mean time ``(m,)``."""
+    count = np.bincount(cell, minlength=m).astype(float)
     safe = np.maximum(count, 1)
-    mean = np.stack([np.bincount(data.cell, mapped[:, i], minlength=m) for i in range(3)], axis=1) / safe[:, None]
+    mean = np.stack([np.bincount(cell, mapped[:, i], minlength=m) for i in range(3)], axis=1) / safe[:, None]
     cov = np.empty((m, 3, 3))
     for i in range(3):
         for j in range(i, 3):
-            s = np.bincount(data.cell, mapped[:, i] * mapped[:, j], minlength=m) / safe - mean[:, i] * mean[:, j]
+            s = np.bincount(cell, mapped[:, i] * mapped[:, j], minlength=m) / safe - mean[:, i] * mean[:, j]
             cov[:, i, j] = cov[:, j, i] = s
-    # Each surfel takes the line nearest its points' mean time.
-    tau_mean = np.bincount(data.cell, data.tau_s[data.line], minlength=m) / safe
+    tau_mean = np.bincount(cell, data.tau_s[data.line], minlength=m) / safe
     line = np.clip(np.searchsorted(data.tau_s, tau_mean), 0, len(data.tau_s) - 1)
     lower = np.maximum(line - 1, 0)
     line = np.where(np.abs(data.tau_s[lower] - tau_mean) < np.abs(data.tau_s[line] - tau_mean), lower, line)
-    # Back to the observation time: v_obs = R(tau) v_ref (about the centre for positions).
-    Rt = mapping.Rt[line]
-    anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
-    # Range noise stretches every surfel along the line of sight, which tilts the thinnest
-    # axis of its scatter towards it (by degrees, and differently in every frame as the target
-    # turns): the normal is taken from the scatter less the noise's covariance, which lies
-    # along the ray and depends on the normal (:func:`_noise_cov`): start from the raw
-    # scatter's normal and refine.
+    return count, mean, cov, line
+
+
+def _noise_free_normals(
+    cov: FloatArray, Rt: FloatArray, anchor_obs: FloatArray, noise: SensorNoise
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each cell's raw scatter eigenvalues ``(m, 3)`` ascending, its unit normal at ``T`` facing
+    the sensor ``(m, 3)``, from the scatter ``cov`` less the sensor noise's, and that noise's
+    covariance at ``T`` ``(m, 3, 3)``. The noise lies along the ray and depends on the normal
+    (:func:`_noise_cov`): start from the raw scatter's thinnest axis and refine. ``Rt``:
+    ``R(tau)^T`` of each cell's line."""
     w, V = np.linalg.eigh(cov)
     normal_ref = V[:, :, 0]
     for _ in range(NOISE_COV_PASSES):
@@ -326,13 +331,31 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         noise_ref = np.einsum("nij,njk,nlk->nil", Rt, _noise_cov(noise, anchor_obs, normal_obs), Rt)
         normal_ref = np.linalg.eigh(cov - noise_ref)[1][:, :, 0]
     normal_obs = _facing_sensor(np.einsum("nji,nj->ni", Rt, normal_ref), anchor_obs)
+    return w, np.asarray(np.einsum("nij,nj->ni", Rt, normal_obs)), noise_ref
+
+
+def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
+    """Moments of each cell's points mapped to ``T``: centroid, and normal from the scatter less
+    the sensor's; which cells are planar; then the points of the cells across edges handed to
+    the planar cells of their faces (:func:`~.faces.assign_to_faces`), and the moments again."""
+    m = len(data.cell_frame)
+    origin = mapping.center
+    mapped = mapping.apply(data.xyz_m, data.line) - origin
+    count, mean, cov, line = _cell_moments(data, mapped, data.cell, m)
+    # Back to the observation time: v_obs = R(tau) v_ref (about the centre for positions).
+    Rt = mapping.Rt[line]
+    anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
+    # Range noise stretches every surfel along the line of sight, which tilts the thinnest
+    # axis of its scatter towards it (by degrees, and differently in every frame as the target
+    # turns): the normal is taken from the scatter less the noise's covariance.
+    w, normal_ref, noise_ref = _noise_free_normals(cov, Rt, anchor_obs, noise)
+    normal_obs = np.einsum("nji,nj->ni", Rt, normal_ref)
     var = normal_variance(noise, anchor_obs, normal_obs)
     flat = flat_cells(w, var, count)
     spread = count * np.maximum(w[:, 1], 0.0)
     # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
     tilt_var = var / np.maximum(spread, 1e-300)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
-    normal_ref = np.einsum("nij,nj->ni", Rt, normal_obs)  # as normal_ref, now facing the sensor
     planar |= beside_face(
         data.neighbours,
         data.cell,
@@ -347,12 +370,47 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     )
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
-    # the cells across edges left out above, these all lie on one face).
-    shared, spread[planar] = _shared_normals(
+    # the cells across edges left out above, these all lie on one face). These are the planes
+    # the points of the other cells are tested against, and they are pooled again when cells
+    # gain points.
+    pooled_ref = normal_ref.copy()
+    pooled_spread = spread.copy()
+    pooled_ref[planar], pooled_spread[planar] = _shared_normals(
         mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
     )
+    point_cell = assign_to_faces(
+        data.neighbours,
+        data.cell,
+        mapped,
+        mean,
+        pooled_ref,
+        var,
+        var / np.maximum(pooled_spread, 1e-300),
+        count,
+        data.interior & ~planar,
+        planar,
+    )
+    moved = point_cell != data.cell
+    if np.any(moved):
+        # The cells that gained or lost points: their moments, line and normal again.
+        changed = np.zeros(m, dtype=bool)
+        changed[point_cell[moved]] = changed[data.cell[moved]] = True
+        count, mean, cov, line = _cell_moments(data, mapped, point_cell, m)
+        Rt = mapping.Rt[line]
+        anchor_obs = origin + np.einsum("nji,nj->ni", Rt, mean)
+        w[changed], normal_ref[changed], noise_ref[changed] = _noise_free_normals(
+            cov[changed], Rt[changed], anchor_obs[changed], noise
+        )
+        normal_obs = np.einsum("nji,nj->ni", Rt, normal_ref)
+        spread = count * np.maximum(w[:, 1], 0.0)
+        pooled_ref[planar], spread[planar] = _shared_normals(
+            mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
+        )
+    else:
+        spread[planar] = pooled_spread[planar]
+    shared = pooled_ref[planar]
     normal_obs[planar] = _facing_sensor(np.einsum("nji,nj->ni", Rt[planar], shared), anchor_obs[planar])
     var = normal_variance(noise, anchor_obs, normal_obs)
     # The normal's tilt from noise: the sensor's variance along it over the in-plane spread.
     normal_var = var / np.maximum(spread, 1e-300)
-    return Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping)
+    return Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping, point_cell)
