@@ -250,8 +250,8 @@ def dense_bound(
 
 def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float) -> NDArray[np.bool_]:
     """The hits the dense fit can use: those in planar surfels, built as the estimator builds
-    them (cells of extent / 100) at the true motion. The rest lie near edges of faces and of
-    the view, where a cell may straddle two faces."""
+    them (cells of extent / 100) at the true motion, with the points of cells across edges handed
+    to their faces' surfels. The rest lie along edges of faces and of the view, or on booms."""
     frame = sim.frame.astype(np.int64)
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
     tau = sim.t_s - reference_time_s
@@ -262,5 +262,6 @@ def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     mapping = LineMapping(motion.at_reference(reference_time_s).params(), data.tau_s, tuple(range(9)))
     used = np.zeros(len(sim.xyz_m), dtype=bool)
     kept = np.ones(len(used), dtype=bool) if data.kept is None else data.kept
-    used[kept] = build_surfels(data, mapping, noise).planar[data.cell]
+    surf = build_surfels(data, mapping, noise)
+    used[kept] = surf.planar[surf.point_cell]  # with the points handed over to their faces' surfels
     return used
