@@ -22,7 +22,7 @@ from ..conftest import motion_for
 
 
 def _faces(mesh: object) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    vertices = np.asarray(mesh.vertices, dtype=float)  # type: ignore[attr-defined]
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)  # type: ignore[attr-defined]
     triangles = np.asarray(mesh.triangles, dtype=np.int64)  # type: ignore[attr-defined]
     face, normals = mesh_faces(vertices, triangles)
     return vertices, triangles, face, normals

@@ -139,3 +139,35 @@ def test_a_second_start_that_ends_where_the_first_failed_ends_the_search(monkeyp
     _, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert len(refined) == 2 and attempts == 2
     assert "ended where the motion above did" in warnings[-1]
+
+
+def _unmatched_first(monkeypatch: pytest.MonkeyPatch, starts_unmatched: int) -> list[str]:
+    """The first ``starts_unmatched`` starts match no patch of another frame; the rest fit."""
+    made = script(monkeypatch, [(1.0, True, 0)] * 3)
+    solve: Any = est._solve  # the scripted one
+
+    def unmatched(setup: Any, pairs: Any, start: str, warnings: list[str], *, path: str) -> Any:
+        if len(made) < starts_unmatched:
+            made.append(start)
+            raise est.NoSurfacesError("no planar patch of one frame could be matched in another", field="file")
+        return solve(setup, pairs, start, warnings, path=path)
+
+    monkeypatch.setattr(est, "_solve", unmatched)
+    return made
+
+
+def test_a_start_from_which_no_patch_matched_leads_to_the_next(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A fast tumbler's wrong start can map every patch away from the others; that says nothing of
+    # the frames while another start remains.
+    made = _unmatched_first(monkeypatch, 1)
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert made == ["vote", "consensus"] and attempts == 2
+    assert best.solve.path == "registration+consensus+dense"
+    assert any("registration+cone+dense: no planar patch" in w for w in warnings)
+
+
+def test_no_patch_matched_from_any_start_is_the_frames_fault(monkeypatch: pytest.MonkeyPatch) -> None:
+    made = _unmatched_first(monkeypatch, 3)
+    with pytest.raises(est.NoSurfacesError, match="no planar patch"):
+        est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert made == ["vote", "consensus", "swarm"]

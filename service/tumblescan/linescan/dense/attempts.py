@@ -113,6 +113,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
     tried: list[str] = []
     made = 0
     confirmed = False  # a second start led where a motion that failed the check only ended
+    unmatched: list[NoSurfacesError] = []  # starts from which no patch matched another frame's
     for begin, path in starts:
         if confirmed:
             # Two registration starts lead to one motion that fits the points: the failed check
@@ -133,8 +134,11 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
                 confirmed = _check_only(best)
                 continue
             solve = _solve(setup, global_pairs, start, attempt_warnings, path=path)
-        except NoSurfacesError:
-            raise
+        except NoSurfacesError as exc:
+            # From a wrong start no patch may land on another frame's: the next start may do.
+            unmatched.append(exc)
+            tried.append(f"{path}: {exc}")
+            continue
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
@@ -147,6 +151,8 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
         if problem is None:
             break
         tried.append(f"{path}: {problem}" + (" (it ended where the motion above did)" if ended_alike else ""))
+    if best is None and len(unmatched) == len(tried):
+        raise unmatched[0]  # from every start: the frames' surfaces, not the starts, are at fault
     if best is None:
         raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
     kept = list(best.warnings)
