@@ -263,8 +263,8 @@ def best_of_starts(
     done = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref) for f in finalists]
     if plane_starts:
         done = [_restarted(obs, f, t_ref) for f in done]
-        near = [los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG for f in done]
-        done = [_axis_polished(obs, f, t_ref) if n else f for f, n in zip(done, near, strict=True)]
+        is_near = [los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG for f in done]
+        done = [_axis_polished(obs, f, t_ref) if n else f for f, n in zip(done, is_near, strict=True)]
     best = done[int(np.argmin(common_costs(done, radius, centre)))]
     # The winner's weak-perspective twin, started from the converged rate: a short fit's twin was
     # taken from a rate and axis still far off, and so may have missed the twin basin.
