@@ -31,16 +31,18 @@ def _box_edges(half: np.ndarray, centre: np.ndarray) -> list[tuple[np.ndarray, n
 
 def synthetic_tracks(
     seed: int, axis: np.ndarray, rate_deg_s: float, noise_px: float = 0.08, frames: int = 12, step_deg: float = 18.0,
-    drift_px_per_frame: float = 0.0,
+    drift_px_per_frame: float = 0.0, R0: np.ndarray | None = None,
 ) -> tuple[Observations, dict[str, object]]:  # fmt: skip
     """Line observations of a box bus with a wing spinning about ``axis`` (camera frame): every
     edge whose middle faces the camera (its box's centre farther than the edge) in each frame,
     end points with ``noise_px`` of perpendicular noise; the centre drifts across the image by
-    ``drift_px_per_frame``. Returns the observations and the truth."""
+    ``drift_px_per_frame``; ``R0`` (3, 3): the body's attitude at t = 0 (random when None).
+    Returns the observations and the truth."""
     rng = np.random.default_rng(seed)
     edges = _box_edges(np.array([0.8, 0.7, 1.0]), np.zeros(3))
     edges += _box_edges(np.array([0.02, 2.0, 0.8]), np.array([0.0, 2.9, 0.0]))
-    R0 = rot(unit_from_angles(rng.uniform(0, np.pi), rng.uniform(0, 2 * np.pi)), rng.uniform(0, 2 * np.pi))[0]
+    R_random = rot(unit_from_angles(rng.uniform(0, np.pi), rng.uniform(0, 2 * np.pi)), rng.uniform(0, 2 * np.pi))[0]
+    R0 = R_random if R0 is None else R0
     c = np.array([rng.uniform(-2, 2), rng.uniform(-2, 2), RANGE_M])
     w = np.radians(rate_deg_s)
     t = np.cumsum(np.r_[0.0, np.radians(step_deg) / w * rng.uniform(0.97, 1.03, frames - 1)])

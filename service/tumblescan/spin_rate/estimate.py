@@ -18,7 +18,13 @@ from .options import EstimateOptions
 from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackObs
 from .rigid import Observations, RigidFit, fit_rigid
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
-from .search import best_of_starts_without_strays, los_start, scan_starts, with_drift_if_needed
+from .search import (
+    best_of_starts_without_strays,
+    los_start,
+    plane_ladder_starts,
+    scan_starts,
+    with_drift_if_needed,
+)
 
 MIN_TRACK_FRAMES = 3
 LONG_TRACK_FRAMES = 6
@@ -110,11 +116,14 @@ def estimate_spin(
     on_los = los_start(obs, c0) if sense_hint and los_angle_deg(starts[0][1]) <= LOS_START_MAX_DEG else None
     if on_los is not None and w_lo <= on_los[0] <= w_hi:
         starts.append(on_los)
+    # The image does not turn: the axis may lie near the image plane, where the scan ranks rates
+    # poorly; a ladder of rates with image-plane axes starts more fits (search.plane_ladder_starts).
+    plane = None if sense_hint else plane_ladder_starts(obs, w_lo, w_hi, c0, radius, t[0])
     clock["scan"] = time.perf_counter()
     # 6. Short rigid fits from each start (and their twins, and the leader at simple multiples of
     # its rate), the best carried on, and again without tracks that follow no rigid line; peel the
     # outliers; re-match every frame's segments to its lines and refit.
-    obs, fit = best_of_starts_without_strays(obs, starts, t[0], w_lo, w_hi, c0, radius)
+    obs, fit = best_of_starts_without_strays(obs, starts, t[0], w_lo, w_hi, c0, radius, plane)
     obs, fit = reject_outliers(obs, fit, t[0])
     fit = with_drift_if_needed(obs, fit, t[0])
     progress("fit", 0.85)
