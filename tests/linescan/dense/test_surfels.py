@@ -6,7 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
-from tumblescan.linescan.dense.surfels import SPURIOUS_MIN_SHARE, LineMapping, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import (
+    SPURIOUS_MIN_SHARE,
+    DenseData,
+    LineMapping,
+    Surfels,
+    build_surfels,
+    prepare,
+)
 from tumblescan.linescan.sensor import SensorNoise
 
 NOISE = SensorNoise()  # Table 1: 2 cm along the line of sight, 36 arcsec across it
@@ -145,16 +152,23 @@ def _folded_wall(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return NOISE.sample(clean, np.random.default_rng(seed)), tau, face - face.min()
 
 
-def test_cells_beside_the_edges_of_narrow_faces_are_used_and_cells_across_them_are_not() -> None:
-    # Every cell beside an edge lies on one face and is used (the neighbour that straddles the
-    # edge used to veto it: 3 cells lost per edge, a third of every face). A cell half on either
-    # face has its normal halfway between its neighbours', like a curve's, and is not.
-    xyz, tau, face = _folded_wall(seed=6)
+def _folded_wall_surfels(seed: int) -> tuple[np.ndarray, DenseData, Surfels, np.ndarray, np.ndarray]:
+    """The folded wall's points, cells and surfels at a fixed motion, each point's face, and each
+    cell's points per face ``(cells, faces)``."""
+    xyz, tau, face = _folded_wall(seed=seed)
     data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=0.3)
     x = np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0])
     surf = build_surfels(data, LineMapping(x, data.tau_s, tuple(range(9))), NOISE)
     per_face = np.zeros((len(data.cell_frame), face.max() + 1))
     np.add.at(per_face, (data.cell, face), 1)
+    return xyz, data, surf, face, per_face
+
+
+def test_cells_beside_the_edges_of_narrow_faces_are_used_and_cells_across_them_are_not() -> None:
+    # Every cell beside an edge lies on one face and is used (the neighbour that straddles the
+    # edge used to veto it: 3 cells lost per edge, a third of every face). A cell half on either
+    # face has its normal halfway between its neighbours', like a curve's, and is not.
+    _, _, surf, _, per_face = _folded_wall_surfels(seed=6)
     mixed = np.count_nonzero(per_face, axis=1) > 1
     count = per_face.sum(axis=1)
     assert np.count_nonzero(mixed) > 50  # 4 edges cut cells
@@ -171,12 +185,7 @@ def test_points_of_cells_across_edges_join_the_surfels_of_their_faces() -> None:
     # that took points in stay on their face: taking each point to the best-fitting surfel of
     # its face sorted the points by the sign of their noise, and put those centroids 4
     # standard errors (rms) off their face.
-    xyz, tau, face = _folded_wall(seed=6)
-    data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=0.3)
-    x = np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0])
-    surf = build_surfels(data, LineMapping(x, data.tau_s, tuple(range(9))), NOISE)
-    per_face = np.zeros((len(data.cell_frame), face.max() + 1))
-    np.add.at(per_face, (data.cell, face), 1)
+    xyz, data, surf, face, per_face = _folded_wall_surfels(seed=6)
     mixed = np.count_nonzero(per_face, axis=1) > 1
     assert not np.any(surf.planar & mixed)
     used = surf.planar[surf.point_cell]

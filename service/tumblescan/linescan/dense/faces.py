@@ -8,6 +8,8 @@ surfaces and beside thin structures, whose points lie on one face.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -112,18 +114,25 @@ def inside_face(
     return np.asarray(hit & (same_face | smooth))
 
 
-def beside_face(
-    neighbours: IntArray,
-    cell: IntArray,
-    mapped_m: FloatArray,
-    mean_m: FloatArray,
-    normal_ref: FloatArray,
-    var_m2: FloatArray,
-    tilt_var_rad2: FloatArray,
-    count: FloatArray,
-    candidate: NDArray[np.bool_],
-    face: NDArray[np.bool_],
-) -> NDArray[np.bool_]:
+@dataclass(frozen=True)
+class CellPlanes:
+    """The cells' planes at ``T`` and the points in them, for :func:`beside_face` and
+    :func:`assign_to_faces`: ``neighbours`` (m, 8) cell indices (-1: none), ``cell`` (n,) each
+    point's cell, ``mapped_m`` (n, 3) the points at ``T``, ``mean_m`` (m, 3) centroids,
+    ``normal_ref`` (m, 3) unit normals at ``T``, ``var_m2`` (m,) a point's noise variance along
+    the normal, ``tilt_var_rad2`` (m,) the normal's tilt variance, ``count`` (m,) points."""
+
+    neighbours: IntArray
+    cell: IntArray
+    mapped_m: FloatArray
+    mean_m: FloatArray
+    normal_ref: FloatArray
+    var_m2: FloatArray
+    tilt_var_rad2: FloatArray
+    count: FloatArray
+
+
+def beside_face(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """The ``candidate`` cells (flat and interior, yet not :func:`inside_face`) that lie on the
     plane of a neighbour inside a face: their normal agrees with at least
     ``BESIDE_MIN_NEIGHBOURS`` such neighbours', and every one of their points (``mapped_m`` at
@@ -138,6 +147,8 @@ def beside_face(
     went from 55 to 70 % on the truss and 52 to 67 % on Hubble; on the box the accepted cells
     holding any point of another face went from 0.25 to 2.8 % (100 m; 1.9 % at 50 m), with 0.3 %
     of their points on another face, within the sigmas above of the plane."""
+    neighbours, cell, mapped_m, mean_m = planes.neighbours, planes.cell, planes.mapped_m, planes.mean_m
+    normal_ref, var_m2, tilt_var_rad2, count = planes.normal_ref, planes.var_m2, planes.tilt_var_rad2, planes.count
     nb = neighbours
     safe = np.where(nb >= 0, nb, 0)
     rows = np.arange(len(nb))
@@ -159,18 +170,7 @@ def beside_face(
     return np.asarray(ok & (worst <= BESIDE_MAX_SIGMAS**2))
 
 
-def assign_to_faces(
-    neighbours: IntArray,
-    cell: IntArray,
-    mapped_m: FloatArray,
-    mean_m: FloatArray,
-    normal_ref: FloatArray,
-    var_m2: FloatArray,
-    tilt_var_rad2: FloatArray,
-    count: FloatArray,
-    candidate: NDArray[np.bool_],
-    face: NDArray[np.bool_],
-) -> IntArray:
+def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[np.bool_]) -> IntArray:
     """Each point's cell ``(n,)``, with the points of the ``candidate`` cells (not on one face:
     across an edge, beside a boom, on the silhouette) handed to the neighbouring ``face`` cell
     on whose plane they lie.
@@ -193,6 +193,8 @@ def assign_to_faces(
     the band along the edge where the faces cannot be told apart stays out, and points on no
     plane stay in their cell, which is not planar.
     """
+    neighbours, cell, mapped_m, mean_m = planes.neighbours, planes.cell, planes.mapped_m, planes.mean_m
+    normal_ref, var_m2, tilt_var_rad2, count = planes.normal_ref, planes.var_m2, planes.tilt_var_rad2, planes.count
     point_cell = cell.copy()
     # The candidate cells with a neighbour inside a face, and each such neighbour's plane.
     nb_all = np.where(neighbours >= 0, neighbours, 0)

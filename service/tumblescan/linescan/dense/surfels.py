@@ -10,7 +10,7 @@ with the motion like a point.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 from ..sensor import SensorNoise, azimuth_elevation
-from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, assign_to_faces, beside_face, flat_cells, inside_face
+from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, CellPlanes, assign_to_faces, beside_face, flat_cells, inside_face
 from .returns import range_inliers
 
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
@@ -356,18 +356,8 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
     tilt_var = var / np.maximum(spread, 1e-300)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
-    planar |= beside_face(
-        data.neighbours,
-        data.cell,
-        mapped,
-        mean,
-        normal_ref,
-        var,
-        tilt_var,
-        count,
-        flat & data.interior & ~planar,
-        planar,
-    )
+    planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
+    planar |= beside_face(planes, flat & data.interior & ~planar, planar)
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face). These are the planes
@@ -378,18 +368,8 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     pooled_ref[planar], pooled_spread[planar] = _shared_normals(
         mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
     )
-    point_cell = assign_to_faces(
-        data.neighbours,
-        data.cell,
-        mapped,
-        mean,
-        pooled_ref,
-        var,
-        var / np.maximum(pooled_spread, 1e-300),
-        count,
-        data.interior & ~planar,
-        planar,
-    )
+    pooled = replace(planes, normal_ref=pooled_ref, tilt_var_rad2=var / np.maximum(pooled_spread, 1e-300))
+    point_cell = assign_to_faces(pooled, data.interior & ~planar, planar)
     moved = point_cell != data.cell
     if np.any(moved):
         # The cells that gained or lost points: their moments, line and normal again.
