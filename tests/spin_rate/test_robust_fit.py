@@ -4,13 +4,15 @@ and σ against the scatter of the estimates."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tumblescan.spin_rate.association import reject_outliers
 from tumblescan.spin_rate.rigid import Observations, fit_rigid
 from tumblescan.spin_rate.rotation import rot, unit_from_angles
-from tumblescan.spin_rate.search import best_of_starts, scan_starts, with_drift_if_needed
+from tumblescan.spin_rate.search import best_of_starts, centre_distance, scan_starts, with_drift_if_needed
 from tumblescan.spin_rate.tracking import reject_jumps
 
 F_PX = 1100.0
@@ -100,6 +102,28 @@ def test_a_jump_far_off_the_pairs_prediction_is_cut() -> None:
     offsets = np.array([0.2, 0.3, 0.25, 2.6, 0.2])  # the fourth edge jumped 2.6 px to a neighbour
     assert reject_jumps(pairs, offsets) == [(0, 0), (1, 1), (2, 2), (4, 4)]
     assert reject_jumps(pairs, np.full(5, 0.3)) == pairs  # a pair turned uniformly: nothing cut
+
+
+def test_the_plausibility_distances_do_not_depend_on_the_scale_the_fit_ended_at() -> None:
+    # The images fix the scene up to a scale about the camera: with c0_z = 1, c0 slides along the
+    # axis as the scene scales, and a fit of the true motion can end anywhere on that family. The
+    # distances that rule a fit implausible must not: a fit of the truth once ended at 1.16 times
+    # the scale, its axis 2.1 radii from the centre guess (over the limit of 2) instead of 0.4, and
+    # the wrong twin won (CI, a start at twice the rate).
+    axis = unit_from_angles(np.radians(55.0), np.radians(-70.0))
+    obs, truth = synthetic_tracks(5, axis, 24.0)
+    centre = np.asarray(truth["c0"])
+    t0 = float(truth["t"][0])  # type: ignore[index]
+    fit = fit_rigid(obs, float(truth["rate"]), axis, centre, t0)  # type: ignore[arg-type]
+    a = fit.axis
+    miss, to_lines = centre_distance(fit, centre)
+    for scale in (0.8, 1.16, 1.5):
+        slide = (1 - scale) / a[2]  # back to depth 1 along the axis
+        moved = replace(fit, c0=scale * fit.c0 + slide * a, lines_p=scale * fit.lines_p - slide * a)
+        assert moved.c0[2] == pytest.approx(1.0)
+        miss_moved, to_lines_moved = centre_distance(moved, centre)
+        assert miss_moved == pytest.approx(miss, rel=1e-9, abs=1e-12)
+        np.testing.assert_allclose(to_lines_moved, to_lines, rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("factor", [0.5, 2.0])

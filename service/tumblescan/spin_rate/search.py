@@ -209,11 +209,30 @@ def centre_distance(fit: RigidFit, centre: FloatArray) -> tuple[float, FloatArra
     """How far the fit puts the body from the target seen in the images, in units of the range:
     the distance from ``centre`` (3,) (the target's centre guess, depth 1) to the axis line, and
     each line's distance (T,) from the axis point ``q`` nearest ``centre``. Both ignore where the
-    centre sits along the axis (a gauge of the model)."""
+    centre sits along the axis (a gauge of the model), and both are taken with the fitted scene
+    scaled so that the axis point nearest the ray through ``centre`` lies at depth 1: the images
+    fix the scene only up to a scale about the camera (``c0_z = 1`` with ``c0`` free to slide
+    along the axis leaves ``c0 -> λ c0 + (1 - λ) a / a_z`` free), and a fit can end anywhere along
+    that family (a fit of the true motion once ended at λ = 1.16, with its axis 2.1 radii from
+    the centre guess instead of 0.4)."""
     a = fit.axis
-    q = fit.c0 + ((centre - fit.c0) @ a) * a
-    to_lines = np.linalg.norm(np.cross(fit.c0 + fit.lines_p - q, fit.lines_d), axis=1)
+    scale = 1.0 / _depth_nearest_ray(fit.c0, a, centre)
+    c0, lines_p = fit.c0 * scale, fit.lines_p * scale
+    q = c0 + ((centre - c0) @ a) * a
+    to_lines = np.linalg.norm(np.cross(c0 + lines_p - q, fit.lines_d), axis=1)
     return float(np.linalg.norm(centre - q)), np.asarray(to_lines, dtype=float)
+
+
+def _depth_nearest_ray(c0: FloatArray, a: FloatArray, centre: FloatArray) -> float:
+    """The depth of the point of the axis line ``c0 + s a`` nearest the ray through ``centre``;
+    ``c0``'s own (1) when the axis runs along the ray or the point lies behind the camera."""
+    u = centre / np.linalg.norm(centre)
+    b = float(a @ u)
+    if 1.0 - b * b < 1e-9:
+        return float(c0[2])
+    s = (b * float(u @ c0) - float(a @ c0)) / (1.0 - b * b)
+    depth = float(c0[2] + s * a[2])
+    return depth if depth > 1e-3 else float(c0[2])
 
 
 def best_of_starts(
