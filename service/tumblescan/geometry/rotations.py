@@ -73,12 +73,17 @@ def tangent_basis(a: Array) -> tuple[Array, Array]:
     ``e2 = a × e1`` (a right-handed frame ``e1, e2, a``). ``e1`` is ``a`` crossed with whichever
     coordinate axis is farther from it, so it is defined for every ``a``."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = _cross_1d(a, helper)
+    e1 = cross3(a, helper)
     e1 = e1 / np.linalg.norm(e1)
-    return e1, _cross_1d(a, e1)
+    return e1, cross3(a, e1)
 
 
-def _cross_1d(u: Array, w: Array) -> Array:
-    """``u × w`` of two (3,) vectors: ``np.cross``'s arithmetic without its overhead, most of the
-    cost for one vector (the spin fit builds thousands of tangent bases)."""
-    return np.array([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]])
+def cross3(u: Array, w: Array) -> Array:
+    """``u × w`` over the last axis of 3-vectors, broadcast: ``np.cross``'s arithmetic without its
+    overhead, which dominates on the small arrays the spin fit evaluates tens of thousands of
+    times (and on single vectors: the fit builds thousands of tangent bases)."""
+    if u.ndim == 1 and w.ndim == 1:  # plain floats: a fifth of np.stack's cost on 0-d arrays
+        return np.array([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]])
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
+    return np.stack([u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0], axis=-1)

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._typing import FloatArray, IntArray
-from ..geometry.rotations import tangent_basis
-from .rigid_model import RigidModel, cross3
+from ..geometry.rotations import cross3, tangent_basis
+from .rigid_model import RigidModel
 from .rotation import rot
 
 

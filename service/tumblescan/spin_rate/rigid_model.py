@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._typing import FloatArray
-from ..geometry.rotations import tangent_basis
+from ..geometry.rotations import cross3, tangent_basis
 from .rotation import rot
 
 
@@ -63,7 +63,7 @@ class RigidModel:
         Rd = np.einsum("oij,oj->oi", R, d[self.track])
         u = (c0 + v * self.dt[:, None] + Rp) @ self.K.T
         w = Rd @ self.K.T
-        return R, Rp, Rd, u, w, _cross_rows(u, w)
+        return R, Rp, Rd, u, w, cross3(u, w)
 
     def residuals(self, x: FloatArray) -> FloatArray:
         """The signed end-point distances (2·O,) px, observation-major."""
@@ -118,20 +118,3 @@ class RigidModel:
         )  # (O, 2, 4)
         J[self._rows, self._cols] = local
         return J
-
-
-def cross3(u: FloatArray, w: FloatArray) -> FloatArray:
-    """``u × w`` over the last axis, broadcast (``np.cross`` at a fraction of its overhead)."""
-    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
-    w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
-    return np.stack([u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0], axis=-1)
-
-
-def _cross_rows(u: FloatArray, w: FloatArray) -> FloatArray:
-    """Row-wise ``u × w`` for (N, 3) arrays: ``np.cross`` with a fifth of its overhead on the
-    small arrays the fit evaluates tens of thousands of times."""
-    out = np.empty_like(u)
-    out[:, 0] = u[:, 1] * w[:, 2] - u[:, 2] * w[:, 1]
-    out[:, 1] = u[:, 2] * w[:, 0] - u[:, 0] * w[:, 2]
-    out[:, 2] = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-    return out
