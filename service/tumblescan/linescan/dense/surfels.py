@@ -334,6 +334,12 @@ def _noise_free_normals(
     return w, np.asarray(np.einsum("nij,nj->ni", Rt, normal_obs)), noise_ref
 
 
+def _tilt_variance(var_m2: FloatArray, spread_m2: FloatArray) -> FloatArray:
+    """A plane's normal tilt from noise (rad²): the sensor's variance along the normal ``var_m2``
+    over the in-plane spread of its points, ``spread_m2`` (count × the middle eigenvalue)."""
+    return np.asarray(var_m2 / np.maximum(spread_m2, 1e-300))
+
+
 def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
     """Moments of each cell's points mapped to ``T``: centroid, and normal from the scatter less
     the sensor's; which cells are planar; then the points of the cells across edges handed to
@@ -353,8 +359,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     var = normal_variance(noise, anchor_obs, normal_obs)
     flat = flat_cells(w, var, count)
     spread = count * np.maximum(w[:, 1], 0.0)
-    # A cell's normal tilt from noise: the sensor's variance along it over the in-plane spread.
-    tilt_var = var / np.maximum(spread, 1e-300)
+    tilt_var = _tilt_variance(var, spread)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
     planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
@@ -368,7 +373,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     pooled_ref[planar], pooled_spread[planar] = _shared_normals(
         mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
     )
-    pooled = replace(planes, normal_ref=pooled_ref, tilt_var_rad2=var / np.maximum(pooled_spread, 1e-300))
+    pooled = replace(planes, normal_ref=pooled_ref, tilt_var_rad2=_tilt_variance(var, pooled_spread))
     point_cell = assign_to_faces(pooled, data.interior & ~planar, planar)
     moved = point_cell != data.cell
     if np.any(moved):
@@ -391,6 +396,5 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     shared = pooled_ref[planar]
     normal_obs[planar] = _facing_sensor(np.einsum("nji,nj->ni", Rt[planar], shared), anchor_obs[planar])
     var = normal_variance(noise, anchor_obs, normal_obs)
-    # The normal's tilt from noise: the sensor's variance along it over the in-plane spread.
-    normal_var = var / np.maximum(spread, 1e-300)
+    normal_var = _tilt_variance(var, spread)
     return Surfels(anchor_obs, normal_obs, line.astype(np.int64), count, planar, var, normal_var, mapping, point_cell)
