@@ -82,17 +82,34 @@ class BlockNormal:
         self._par: float | None = None
 
     def scale(self, diag: FloatArray) -> None:
-        """Divide the columns by ``diag`` (g + B·b,) for the solves that follow."""
+        """Divide the columns by ``diag`` (g + B·b,) for the solves that follow, and take each
+        block's eigenvectors ``V_j = Q_j Λ_j Q_jᵀ``: every damping then costs one small product
+        (``(V_j + λ I)⁻¹ = Q_j (Λ_j + λ)⁻¹ Q_jᵀ``), and the solves work in the coordinates
+        ``(y_global, Q_jᵀ y_j)`` ("hat" coordinates, the same norms)."""
         g, b, B = self.g, self.b, self.n_blocks
         dg, db = diag[:g], diag[g:].reshape(B, b)
         self.diag = diag
         self.U = self._U / np.outer(dg, dg)
         self.W = self._W / (dg[None, :, None] * db[:, None, :])
-        self._W_flat = self.W.transpose(1, 0, 2).reshape(g, B * b)  # (g, B·b): the coupling as one matrix
         self.V = self._V / (db[:, :, None] * db[:, None, :])
+        lam, Q = np.linalg.eigh(self.V)
+        self._lam = np.maximum(lam, 0.0).ravel()  # (B·b,): V is positive semi-definite
+        self._Q = Q
+        self._W_hat = (self.W @ Q).transpose(1, 0, 2).reshape(g, B * b)  # (g, B·b): W_j Q_j side by side
         self.grad = self.jtf / diag
+        self.grad_hat = self.to_hat(self.grad)
         self._par = None
         self.gauss_newton: tuple[FloatArray, float] | None = None
+
+    def to_hat(self, y: FloatArray) -> FloatArray:
+        """``(y_global, Q_jᵀ y_j)`` of a scaled vector ``y``."""
+        yb = y[self.g :].reshape(self.n_blocks, self.b, 1)
+        return np.concatenate([y[: self.g], (self._Q.transpose(0, 2, 1) @ yb).ravel()])
+
+    def from_hat(self, y_hat: FloatArray) -> FloatArray:
+        """The scaled vector of hat coordinates ``y_hat``."""
+        yb = y_hat[self.g :].reshape(self.n_blocks, self.b, 1)
+        return np.concatenate([y_hat[: self.g], (self._Q @ yb).ravel()])
 
     def factor(self, par: float, gauge: FloatArray | None = None) -> None:
         """Prepare solves of ``(J̃ᵀJ̃ + par·I) y = z`` (``J̃`` the scaled Jacobian, ``par > 0``).
@@ -101,25 +118,29 @@ class BlockNormal:
         of the global solution (the Schur complement ``S`` has them as exact null vectors, but
         computes them as round-off, up to ~1e-9 of the scaled ``J̃ᵀJ̃``, near the genuine small
         eigenvalues of weakly determined fits): for the nearly undamped Gauss-Newton step."""
-        g, b, B = self.g, self.b, self.n_blocks
-        V_inv = np.linalg.inv(self.V + par * np.eye(b))
-        Y_flat = (self.W @ V_inv).transpose(1, 0, 2).reshape(g, B * b)
-        S = self.U - Y_flat @ self._W_flat.T + par * np.eye(g)
+        g = self.g
+        inv_lam = 1.0 / (self._lam + par)
+        S = self.U - (self._W_hat * inv_lam) @ self._W_hat.T + par * np.eye(g)
         if gauge is not None and len(gauge):
-            G = np.linalg.qr((gauge * self.diag[:g]).T)[0]  # (g, k) orthonormal, scaled
+            G = (gauge * self.diag[:g]).T  # (g, k) in the scaled coordinates, made orthonormal
+            G = G / np.linalg.norm(G) if G.shape[1] == 1 else np.linalg.qr(G)[0]
             P = np.eye(g) - G @ G.T
             S_inv = P @ np.linalg.inv(P @ S @ P + G @ G.T) @ P  # the inverse on the complement of G
         else:
             S_inv = np.linalg.inv(S)
-        self._V_inv, self._Y_flat, self._S_inv, self._par = V_inv, Y_flat, S_inv, par
+        self._inv_lam, self._S_inv, self._par = inv_lam, S_inv, par
+
+    def solve_hat(self, z_hat: FloatArray) -> FloatArray:
+        """``(J̃ᵀJ̃ + par·I)⁻¹ z`` for the last ``factor``, ``z`` and the result in hat coordinates:
+        the Schur complement's solve, then the blocks' back-substitution."""
+        assert self._par is not None
+        zg, zb = z_hat[: self.g], z_hat[self.g :]
+        yg = self._S_inv @ (zg - self._W_hat @ (self._inv_lam * zb))
+        return np.concatenate([yg, self._inv_lam * (zb - self._W_hat.T @ yg)])
 
     def solve(self, z: FloatArray) -> FloatArray:
-        """``y = (J̃ᵀJ̃ + par·I)⁻¹ z`` (g + B·b,) for the last ``factor``: Schur complement, then back-substitution."""
-        assert self._par is not None
-        zg, zb = z[: self.g], z[self.g :]
-        yg = self._S_inv @ (zg - self._Y_flat @ zb)
-        rb = (zb - self._W_flat.T @ yg).reshape(self.n_blocks, self.b, 1)
-        return np.concatenate([yg, (self._V_inv @ rb).ravel()])
+        """``y = (J̃ᵀJ̃ + par·I)⁻¹ z`` (g + B·b,) for the last ``factor`` (scaled coordinates)."""
+        return self.from_hat(self.solve_hat(self.to_hat(z)))
 
     def apply(self, y: FloatArray) -> FloatArray:
         """``J̃ y`` (m,) for a scaled vector ``y`` (``J`` times the unscaled ``y / diag``)."""
@@ -137,17 +158,17 @@ def _lm_parameter(
     or the Gauss-Newton step (``par = 0``) when it is shorter than ``1.1 Δ``. The Gauss-Newton step
     is damped by ``rcond`` (the scaled columns have norms ≤ 1), which bounds it in (nearly) singular
     directions; its Newton bound ``parl`` is then a bound for ``par - rcond``, still a lower bound."""
-    minus_grad = -normal.grad
+    minus_grad = -normal.grad_hat  # all in hat coordinates (the same norms), the step converted at the end
     if normal.gauss_newton is None:  # the same for every inner iteration of one Jacobian
         normal.factor(rcond, gauge)
-        step0 = normal.solve(minus_grad)
+        step0 = normal.solve_hat(minus_grad)
         norm0 = float(np.linalg.norm(step0))
-        normal.gauss_newton = (step0, float(step0 @ normal.solve(step0)) / norm0**2 if norm0 > 0 else 0.0)
+        normal.gauss_newton = (step0, float(step0 @ normal.solve_hat(step0)) / norm0**2 if norm0 > 0 else 0.0)
     step, qhq = normal.gauss_newton
     dxnorm = float(np.linalg.norm(step))
     fp = dxnorm - delta
     if fp <= 0.1 * delta:
-        return 0.0, step
+        return 0.0, normal.from_hat(step)
     parl = (fp / delta) / qhq if qhq > 0 else 0.0
     gnorm = float(np.linalg.norm(minus_grad))
     paru = gnorm / delta
@@ -160,18 +181,18 @@ def _lm_parameter(
         if par == 0:
             par = max(_DWARF, 0.001 * paru)
         normal.factor(par)
-        step = normal.solve(minus_grad)
+        step = normal.solve_hat(minus_grad)
         dxnorm = float(np.linalg.norm(step))
         previous, fp = fp, dxnorm - delta
         if abs(fp) <= 0.1 * delta or (parl == 0 and fp <= previous and previous < 0) or it == 10:
             break
-        parc = (fp / delta) / (float(step @ normal.solve(step)) / dxnorm**2)
+        parc = (fp / delta) / (float(step @ normal.solve_hat(step)) / dxnorm**2)
         if fp > 0:
             parl = max(parl, par)
         if fp < 0:
             paru = min(paru, par)
         par = max(parl, par + parc)
-    return par, step
+    return par, normal.from_hat(step)
 
 
 def block_lm(
