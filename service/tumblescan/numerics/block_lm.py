@@ -3,8 +3,8 @@ small blocks, each block touching only its own rows (bundle-adjustment structure
 
 The normal matrix ``[[U, W], [Wᵀ, V]]`` of such a problem has ``V`` block-diagonal, so each
 damped step eliminates the blocks (Schur complement ``S = U - W V⁻¹ Wᵀ``), solves the small
-global system and back-substitutes: per block a ``b×b`` solve, stacked, instead of a dense QR
-of the whole Jacobian.
+global system and back-substitutes: per block ``b×b`` products (each block's eigenvectors taken
+once per Jacobian serve every damping), stacked, instead of a dense QR of the whole Jacobian.
 
 The iteration is Moré's (MINPACK ``lmder`` / ``lmpar``, as ``scipy.optimize.least_squares(
 method="lm", x_scale="jac")`` runs it): variables scaled by the running maximum of the
@@ -121,8 +121,8 @@ class BlockNormal:
         g = self.g
         inv_lam = 1.0 / (self._lam + par)
         S = self.U - (self._W_hat * inv_lam) @ self._W_hat.T + par * np.eye(g)
-        if gauge is not None and len(gauge):
-            G = (gauge * self.diag[:g]).T  # (g, k) in the scaled coordinates, made orthonormal
+        G = np.zeros((g, 0)) if gauge is None else (gauge * self.diag[:g]).T  # (g, k), scaled
+        if G.shape[1] and np.linalg.norm(G) > 0:  # made orthonormal
             G = G / np.linalg.norm(G) if G.shape[1] == 1 else np.linalg.qr(G)[0]
             P = np.eye(g) - G @ G.T
             S_inv = P @ np.linalg.inv(P @ S @ P + G @ G.T) @ P  # the inverse on the complement of G
