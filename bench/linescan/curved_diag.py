@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from tumblescan import Scanner, Scene, random_motion, simulate_frames
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.covariance import cauchy_curvature, patches, sandwich
+from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.matching import CAUCHY_C, linearize, match, weights
 from tumblescan.linescan.dense.refine import refine_dense
 from tumblescan.linescan.dense.registration import extent_m
@@ -32,6 +32,7 @@ from .dense_bound import _body_frame, dense_bound, face_of_hits
 from .real_shapes import shape_named
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
+UNIT = ("deg", "deg_s", "deg", "deg_s")
 
 
 def part_of_triangles(shape: Any) -> tuple[list[str], np.ndarray]:
@@ -135,8 +136,8 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
             b = dense_bound(motion, scene, sim, T, hits=on, faces=faces)
             bu = dense_bound(motion, scene, sim, T, hits=on & used, faces=faces) if (on & used).sum() > 50 else None
             rows.append([pname, int(on.sum()), f"{100 * used[on].mean():.0f} %",
-                         *[f"{b[f'{p}_{u}']:.4f}" for p, u in zip(PARAMS, ("deg", "deg_s", "deg", "deg_s"))],
-                         *([f"{bu[f'{p}_{u}']:.4f}" for p, u in zip(PARAMS, ("deg", "deg_s", "deg", "deg_s"))]
+                         *[f"{b[f'{p}_{u}']:.4f}" for p, u in zip(PARAMS, UNIT, strict=True)],
+                         *([f"{bu[f'{p}_{u}']:.4f}" for p, u in zip(PARAMS, UNIT, strict=True)]
                            if bu else ["-"] * 4)])  # fmt: skip
         print(table(rows, ["part", "hits", "used", *[f"bnd {p}" for p in PARAMS], *[f"bnd-used {p}" for p in PARAMS]]))
     fit = refine_dense(data, x_true, noise=noise)
@@ -170,21 +171,19 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
     cov_jk = sandwich(lin.J, lin.r, lin.var, c, cluster, None)
     # By surfel (source cell): the clustering of one surfel's residuals only.
     cov_surf = sandwich(lin.J, lin.r, lin.var, c, np.unique(m.src, return_inverse=True)[1], None)
-    from tumblescan.target.motion import N_PARAMS
     from tumblescan.linescan.validation import canonical_cov
 
     def sd_of(cov: np.ndarray) -> dict[str, float]:
         return sigmas_deg(fit.x, canonical_cov(fit.x, cov))
 
     extra = {"iid": sd_of(cov_iid), "jk-patch": sd_of(cov_jk), "jk-surfel": sd_of(cov_surf)}
-    print(
-        f"residuals {len(lin.r)}, scale {scale:.2f}, patches {cluster.max() + 1}, "
-        f"median var terms (mm^2): src {1e6 * np.median(surf_f.var_m2[m.src] / surf_f.count[m.src]):.2f} "
-        f"tilt {1e6 * np.median(lin.var - surf_f.var_m2[m.src] / surf_f.count[m.src] - surf_f.var_m2[m.dst] / surf_f.count[m.dst]):.2f}"
-    )
-    _ = N_PARAMS
+    centroid_var = surf_f.var_m2[m.src] / surf_f.count[m.src]
+    tilt_var = lin.var - centroid_var - surf_f.var_m2[m.dst] / surf_f.count[m.dst]
+    print(f"residuals {len(lin.r)}, scale {scale:.2f}, patches {cluster.max() + 1}, median variance terms (mm^2): "
+          f"source centroid {1e6 * np.median(centroid_var):.2f}, "
+          f"tilt over offset {1e6 * np.median(tilt_var):.2f}")  # fmt: skip
     rows = []
-    for p, u in zip(PARAMS, ("deg", "deg_s", "deg", "deg_s")):
+    for p, u in zip(PARAMS, UNIT, strict=True):
         rows.append([p, f"{err[p]:.4f}", f"{sd[p]:.4f}", f"{b_all[f'{p}_{u}']:.4f}", f"{b_used[f'{p}_{u}']:.4f}",
                      f"{sd[p] / b_all[f'{p}_{u}']:.1f}", f"{err[p] / b_all[f'{p}_{u}']:.1f}",
                      *[f"{extra[k][p] / b_all[f'{p}_{u}']:.1f}" for k in extra]])  # fmt: skip
