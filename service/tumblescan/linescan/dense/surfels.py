@@ -41,11 +41,13 @@ NOISE_COV_PASSES = 2
 SHARED_MAX_ANGLE = np.radians(30.0)
 # A planar surfel's anchor is the surface point under its centroid, not the centroid (which
 # lies inside a convex surface, outside a concave one): the curvature is fitted to the pooled
-# normals of the surfels, of every frame, within this many surfel sizes (see _foot_offset).
+# normals of the CURVATURE_NEIGHBOURS nearest surfels, of every frame, within this many surfel
+# sizes (see _foot_offset).
 CURVATURE_CORRECTION = True
 CURVATURE_RADIUS = 2.5
-# Fewer neighbours than this, or a spread of their centres thinner than this share of the
-# radius across its narrowest direction, leave a cell's curvature at zero.
+CURVATURE_NEIGHBOURS = 32
+# Fewer neighbours than this, or their centres spread less than this share as far across
+# their narrowest direction as along their widest (a row of cells), leave the curvature at zero.
 CURVATURE_MIN_NEIGHBOURS = 6
 CURVATURE_MIN_SPREAD = 0.2
 
@@ -274,9 +276,10 @@ def _shared_normals(
 def _foot_offset(centre: FloatArray, normal: FloatArray, spread: FloatArray, *, radius_m: float) -> FloatArray:
     """How far along its normal each cell's centroid lies from the surface point under it,
     ``(k,)``: ``tr(K S) / 2``, with ``K`` the surface's curvature (shape operator, from the
-    pooled normals: ``n_j - n_i = K (c_j - c_i)`` over the cells ``j`` within ``radius_m`` of
-    ``i`` whose normals agree within ``SHARED_MAX_ANGLE``, least squares in ``i``'s tangent
-    plane) and ``S`` the cell's in-plane scatter less the sensor noise's (``spread``, at ``T``).
+    pooled normals: ``n_j - n_i = K (c_j - c_i)`` over the ``CURVATURE_NEIGHBOURS`` cells ``j``
+    nearest ``i`` within ``radius_m`` whose normals agree within ``SHARED_MAX_ANGLE``, least
+    squares in ``i``'s tangent plane) and ``S`` the cell's in-plane scatter less the sensor noise's
+    (``spread``, at ``T``).
 
     On a surface ``h = -p^T K p / 2`` below its tangent plane at the foot (normals facing the
     sensor, so a convex one has ``K > 0``) the points' mean height is ``-tr(K S) / 2``: the
@@ -287,10 +290,12 @@ def _foot_offset(centre: FloatArray, normal: FloatArray, spread: FloatArray, *, 
     always of that sign: a bias common to a patch, which the patch-clustered covariance counts
     (reported sigmas 9-17 times the bound). The foot is where the plane of the two normals'
     mean (the residual's plane) passes through exactly for any quadric surface."""
-    tree = cKDTree(centre)
-    pairs = tree.query_pairs(radius_m, output_type="ndarray")
-    i = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    k = len(centre)
+    nearest = min(CURVATURE_NEIGHBOURS + 1, k)
+    dist, nb = cKDTree(centre).query(centre, k=nearest, distance_upper_bound=radius_m, workers=-1)
+    i = np.repeat(np.arange(k), nearest).reshape(k, nearest)
+    found = np.isfinite(np.asarray(dist).reshape(k, nearest)) & (i != np.asarray(nb).reshape(k, nearest))
+    i, j = i[found], np.asarray(nb).reshape(k, nearest)[found]
     agree = np.einsum("ni,ni->n", normal[i], normal[j]) > np.cos(SHARED_MAX_ANGLE)
     i, j = i[agree], j[agree]
     e1, e2 = perpendiculars(normal)  # (k, 3) each
@@ -299,7 +304,6 @@ def _foot_offset(centre: FloatArray, normal: FloatArray, spread: FloatArray, *, 
     p1, p2 = np.einsum("ni,ni->n", dp, e1[i]), np.einsum("ni,ni->n", dp, e2[i])
     n1, n2 = np.einsum("ni,ni->n", dn, e1[i]), np.einsum("ni,ni->n", dn, e2[i])
     # Rows (p1, p2, 0) -> n1 and (0, p1, p2) -> n2 for K = [[k11, k12], [k12, k22]].
-    k = len(centre)
     M = np.zeros((k, 3, 3))
     b = np.zeros((k, 3))
     rows = ((p1, p2, np.zeros_like(p1), n1), (np.zeros_like(p1), p1, p2, n2))
@@ -316,8 +320,8 @@ def _foot_offset(centre: FloatArray, normal: FloatArray, spread: FloatArray, *, 
     S_pp[:, 0, 1] = S_pp[:, 1, 0] = np.bincount(i, p1 * p2, minlength=k)
     S_pp[:, 1, 1] = np.bincount(i, p2 * p2, minlength=k)
     n_nb = np.bincount(i, minlength=k)
-    thin = np.linalg.eigvalsh(S_pp)[:, 0] / np.maximum(n_nb, 1)
-    ok = (n_nb >= CURVATURE_MIN_NEIGHBOURS) & (thin >= (CURVATURE_MIN_SPREAD * radius_m) ** 2)
+    spread_w = np.linalg.eigvalsh(S_pp)
+    ok = (n_nb >= CURVATURE_MIN_NEIGHBOURS) & (spread_w[:, 0] >= CURVATURE_MIN_SPREAD**2 * spread_w[:, 1])
     kvec = np.zeros((k, 3))
     if np.any(ok):
         kvec[ok] = np.linalg.solve(M[ok], b[ok][:, :, None])[:, :, 0]
