@@ -349,9 +349,10 @@ def _noise_cov(noise: SensorNoise, xyz_obs: FloatArray, normal_obs: FloatArray) 
 
 @dataclass(frozen=True)
 class Surfels:
-    """Every surfel at its own line's observation time (sensor frame): centroid, unit normal
-    facing the sensor, line, point count, whether it is planar, and the sensor variance of one
-    of its points along the normal."""
+    """Every surfel at its own line's observation time (sensor frame): anchor (a planar
+    surfel's: the surface point under its centroid, :func:`_foot_offset`; any other's: the
+    centroid), unit normal facing the sensor, line, point count, whether it is planar, and the
+    sensor variance of one of its points along the normal."""
 
     anchor_obs: FloatArray
     normal_obs: FloatArray
