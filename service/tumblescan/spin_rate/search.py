@@ -13,7 +13,7 @@ import numpy as np
 
 from .._typing import FloatArray, Progress
 from ..geometry.rotations import tangent_basis
-from .association import without_stray_tracks
+from .association import split_piecewise_tracks, without_stray_tracks
 from .rigid import (
     Observations,
     RigidFit,
@@ -57,6 +57,8 @@ PLANE_FINALISTS = 2
 # A centre velocity (2 parameters) is kept when it lowers χ² by more than this: a slow drift of the
 # target across the image is otherwise absorbed by a wrong rate (measured: 1.7 and 6 % off).
 DRIFT_DELTA_CHI2 = 25.0
+# Rounds of cutting piecewise-rigid tracks and comparing the starts again (near the image plane).
+SPLIT_ROUNDS = 3
 Start = tuple[float, FloatArray, FloatArray]
 
 
@@ -331,8 +333,18 @@ def best_of_starts_without_strays(
     """``best_of_starts``; then, when its winner finds tracks that follow no rigid line (px off all
     along, ``association.without_stray_tracks``), the starts compared again without them. Such tracks
     pull every fit, a wrong basin's least (measured: two 16-frame tracks 15-25 px off the true
-    motion made a fit 3.9 % off the cheaper). Returns the observations kept and their fit."""
+    motion made a fit 3.9 % off the cheaper). With ``plane_starts`` (the image does not turn: the
+    axis may lie near the image plane), tracks that follow a rigid line only piecewise under the
+    winner are first cut into their pieces (``association.split_piecewise_tracks``) and the starts
+    compared again, up to ``SPLIT_ROUNDS`` times (the cut under a better winner finds more).
+    Returns the observations kept and their fit."""
     fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts)
+    for _ in range(SPLIT_ROUNDS if plane_starts else 0):  # a better winner shows more switches
+        pieces = split_piecewise_tracks(obs, fit, t_ref)
+        if pieces is None:
+            break
+        obs = pieces
+        fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts)
     kept = without_stray_tracks(obs, fit)
     if kept is None:
         return obs, fit
