@@ -160,9 +160,11 @@ def estimate_spin(
     if twin.cost < fit.cost:
         fit, twin = twin, fit
     ambiguous = 2 * (twin.cost - fit.cost) / s2 < TWIN_DELTA_CHI2
-    # 8. Near the image plane: rival rates the data do not rule out (reported, σ covers them).
+    # 8. Near the image plane: rival rates the data do not rule out (reported, σ covers them). Also
+    # when the image does not turn whatever axis won: a collapsed fit's axis is often tilted 20-60°
+    # toward the line of sight (benchmark plane_100_noisy), out of the 15° band.
     rivals: list[RigidFit] = []
-    if 90.0 - los_angle_deg(fit.axis) <= RATE_RIVAL_PLANE_DEG:
+    if not sense_hint or 90.0 - los_angle_deg(fit.axis) <= RATE_RIVAL_PLANE_DEG:
         rivals = rate_rivals(obs, fit, finalists, t[0], c0, radius)[:MAX_RATE_RIVALS]
     clock["fit"] = time.perf_counter()
     return _result(seq, feats, obs, fit, twin if ambiguous else None, coarse, flags, clock, rivals)
