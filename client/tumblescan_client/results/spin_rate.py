@@ -14,8 +14,9 @@ class _Model(BaseModel):
 
 class AxisCandidate(_Model):
     axis_camera: list[float]
-    kind: str
+    kind: str  # "mirror" (weak-perspective twin) or "rate" (a rival rate near the image plane)
     cost: float
+    rate_deg_s: float | None = None
 
 
 class Spin(_Model):

@@ -20,8 +20,10 @@ from .rigid import Observations, RigidFit, fit_rigid
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
 from .search import (
     best_of_starts_without_strays,
+    common_costs,
     los_start,
     plane_ladder_starts,
+    rate_rivals,
     scan_starts,
     with_drift_if_needed,
 )
@@ -39,6 +41,11 @@ RATE_SIGMA_FLOOR_REL = 0.0015
 IMG_RATE_MAX_FACTOR = 2.5
 REMATCH_ROUNDS = 3
 LOS_START_MAX_DEG = 30.0
+# Within this much of the image plane a rival rate the data do not rule out (search.rate_rivals) is
+# reported, and σ widened to cover it: there the rate rests on short arcs of the edges along the
+# axis (the sense is not reported there either: SENSE_MIN_FROM_PLANE_DEG).
+RATE_RIVAL_PLANE_DEG = 15.0
+MAX_RATE_RIVALS = 2
 
 
 @dataclass(frozen=True)
@@ -123,7 +130,8 @@ def estimate_spin(
     # 6. Short rigid fits from each start (and their twins, and the leader at simple multiples of
     # its rate), the best carried on, and again without tracks that follow no rigid line; peel the
     # outliers; re-match every frame's segments to its lines and refit.
-    obs, fit = best_of_starts_without_strays(obs, starts, t[0], w_lo, w_hi, c0, radius, plane)
+    finalists: list[RigidFit] = []
+    obs, fit = best_of_starts_without_strays(obs, starts, t[0], w_lo, w_hi, c0, radius, plane, finalists)
     obs, fit = reject_outliers(obs, fit, t[0])
     fit = with_drift_if_needed(obs, fit, t[0])
     progress("fit", 0.85)
@@ -152,8 +160,14 @@ def estimate_spin(
     if twin.cost < fit.cost:
         fit, twin = twin, fit
     ambiguous = 2 * (twin.cost - fit.cost) / s2 < TWIN_DELTA_CHI2
+    # 8. Near the image plane: rival rates the data do not rule out (reported, σ covers them). Also
+    # when the image does not turn whatever axis won: a collapsed fit's axis is often tilted 20-60°
+    # toward the line of sight (benchmark plane_100_noisy), out of the 15° band.
+    rivals: list[RigidFit] = []
+    if not sense_hint or 90.0 - los_angle_deg(fit.axis) <= RATE_RIVAL_PLANE_DEG:
+        rivals = rate_rivals(obs, fit, finalists, t[0], c0, radius)[:MAX_RATE_RIVALS]
     clock["fit"] = time.perf_counter()
-    return _result(seq, feats, obs, fit, twin if ambiguous else None, coarse, flags, clock)
+    return _result(seq, feats, obs, fit, twin if ambiguous else None, coarse, flags, clock, rivals)
 
 
 def _observations(seq: Sequence, feats: Features, tracks: list) -> Observations:
@@ -264,13 +278,15 @@ def _sampling(seq: Sequence, rate_deg_s: float) -> tuple[float, float, float]:
 
 def _result(
     seq: Sequence, feats: Features, obs: Observations, fit: RigidFit, twin: RigidFit | None, coarse: float | None,
-    flags: list[str], clock: dict[str, float],
+    flags: list[str], clock: dict[str, float], rivals: list[RigidFit] | None = None,
 ) -> SpinResult:  # fmt: skip
     rate = float(np.degrees(fit.omega_rad_s))
     # Edge biases that move with the lighting are not in the residuals; a relative floor, measured
     # on the simulator benchmark (docs/spin_rate.md), keeps σ from being overconfident. The derived
     # σ alone (formal, per-track sandwich, track jackknife) covered 87 % there, short of 95 %.
     sigma = float(np.hypot(np.degrees(fit.sigma_omega_rad_s), RATE_SIGMA_FLOOR_REL * rate))
+    rivals = rivals or []
+    sigma = sigma_with_rivals(sigma, rate, [float(np.degrees(r.omega_rad_s)) for r in rivals])
     a = fit.axis
     min_rate = seq.meta.prior.min_rate_deg_s
     spinning = not (min_rate is not None and rate < min_rate)
@@ -282,6 +298,26 @@ def _result(
         flags.append("short_arc")
     if twin is not None:
         flags.append("weak_perspective")
+    if rivals:
+        flags.append("rate_ambiguous")
+    candidates = (
+        []
+        if twin is None
+        else [
+            AxisCandidate(
+                axis_camera=[round(float(x), 6) for x in twin.axis], kind="mirror", cost=round(twin.cost / fit.cost, 4)
+            )
+        ]
+    )
+    candidates += [
+        AxisCandidate(
+            axis_camera=[round(float(x), 6) for x in r.axis],
+            kind="rate",
+            cost=round(_cost_ratio(r, fit), 4),
+            rate_deg_s=round(float(np.degrees(r.omega_rad_s)), 6),
+        )
+        for r in rivals
+    ]
     sig_axis = float(np.degrees(np.sqrt(max(np.trace(fit.cov_axis_rad2), 0.0))))
     period = 360.0 / rate if rate > 0 else None
     spin = Spin(
@@ -291,8 +327,7 @@ def _result(
         sense_about_los=sense if spinning else None,
         axis_camera=[round(float(x), 6) for x in a] if spinning else None,
         sigma_axis_deg=round(sig_axis, 4) if spinning else None, axis_ambiguous=twin is not None,
-        axis_candidates=[] if twin is None else [AxisCandidate(axis_camera=[round(float(x), 6) for x in twin.axis],
-                                                               kind="mirror", cost=round(twin.cost / fit.cost, 4))],
+        axis_candidates=candidates,
         axis_los_angle_deg=round(los, 4) if spinning else None,
         projected_axis_angle_deg=round(projected_angle_deg(a), 4) if spinning else None,
         reference_time_s=float(seq.t_s[0]),
@@ -306,6 +341,22 @@ def _result(
     tracks = _tracks_out(seq, obs, fit.residuals_px) if seq.meta.options.return_tracks else None
     return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, fit.residuals_px),
                       tracks=tracks, timings_ms=_timings(clock))  # fmt: skip
+
+
+def sigma_with_rivals(sigma: float, rate: float, rival_rates: list[float]) -> float:
+    """σ (deg/s) of a ``rate`` whose rivals (``rival_rates``, deg/s) the data do not rule out: at
+    least the spread of an equal mixture of the rate and its farthest rival, half their distance,
+    so that |error| <= 4σ holds whichever of the two is true; ``sigma`` without rivals."""
+    if not rival_rates:
+        return sigma
+    far = max(abs(r - rate) for r in rival_rates)
+    return float(np.hypot(sigma, 0.5 * far))
+
+
+def _cost_ratio(rival: RigidFit, fit: RigidFit) -> float:
+    """The rival's cost over the fit's, both at the common Cauchy scale (1 = as good)."""
+    cost = common_costs([fit, rival])
+    return float(cost[1] / cost[0]) if cost[0] > 0 else float("inf")
 
 
 def _static_result(

@@ -74,7 +74,7 @@ def axis_png(seq: Sequence, result: dict[str, Any]) -> bytes:
     centre = frame0.get("centroid_px") or [img.shape[1] / 2, img.shape[0] / 2]
     half = 0.3 * img.shape[1]
     axes = [(spin.get("axis_camera"), AXIS_BGR)] + [
-        (c["axis_camera"], MIRROR_BGR) for c in spin.get("axis_candidates", [])
+        (c["axis_camera"], MIRROR_BGR) for c in spin.get("axis_candidates", []) if c.get("kind") == "mirror"
     ]
     for axis, colour in axes:
         if axis is None:
@@ -114,7 +114,8 @@ def build_report(seq: Sequence, result: dict[str, Any]) -> str:
         ("axis sigma (deg)", s["sigma_axis_deg"]),
         ("axis from the line of sight (deg)", s["axis_los_angle_deg"]),
         ("sense about the line of sight", s["sense_about_los"]),
-        ("mirror twin", s["axis_candidates"][0]["axis_camera"] if s["axis_candidates"] else None),
+        ("mirror twin", next((c["axis_camera"] for c in s["axis_candidates"] if c["kind"] == "mirror"), None)),
+        ("rival rates (deg/s)", [c["rate_deg_s"] for c in s["axis_candidates"] if c["kind"] == "rate"] or None),
         ("tracks / observations", f"{q['line_tracks']} / {q['observations']}"),
         ("fit rms (px)", q["fit_rms_px"]),
         ("revolutions covered", q["revolutions_covered"]),

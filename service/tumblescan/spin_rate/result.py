@@ -7,7 +7,15 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 RESULT_SCHEMA = "tumblescan.spin_from_images.result/1"
-Flag = Literal["short_arc", "weak_perspective", "few_tracks", "target_touches_border", "saturated", "alias_unchecked"]
+Flag = Literal[
+    "short_arc",
+    "weak_perspective",
+    "few_tracks",
+    "target_touches_border",
+    "saturated",
+    "alias_unchecked",
+    "rate_ambiguous",
+]
 
 
 class _Model(BaseModel):
@@ -15,9 +23,14 @@ class _Model(BaseModel):
 
 
 class AxisCandidate(_Model):
+    """Another (axis, rate) the data fit almost as well: the weak-perspective twin (``mirror``, the
+    reported rate), or near the image plane a rival rate (``rate``, with ``rate_deg_s``; the flag
+    ``rate_ambiguous`` and a σ that covers it)."""
+
     axis_camera: list[float]
-    kind: Literal["mirror"]
+    kind: Literal["mirror", "rate"]
     cost: float = Field(description="its fit cost over the best one's (1 = as good)")
+    rate_deg_s: float | None = Field(None, description="a rival's rate (kind rate); null for the mirror twin")
 
 
 class Spin(_Model):

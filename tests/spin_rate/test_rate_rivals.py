@@ -1,0 +1,35 @@
+"""Rival rates near the image plane: found only when the data do not rule them out, and σ covers them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tumblescan.spin_rate.estimate import sigma_with_rivals
+from tumblescan.spin_rate.rigid import fit_rigid
+from tumblescan.spin_rate.search import rate_rivals
+
+from .test_track_split import _spliced_tracks
+
+
+def test_a_worse_basin_is_no_rival_and_a_better_one_is() -> None:
+    clean, _, truth = _spliced_tracks(3)
+    t0 = float(np.asarray(truth["t"])[0])
+    c0, axis, rate = np.asarray(truth["c0"]), np.asarray(truth["axis"]), float(truth["rate"])  # type: ignore[arg-type]
+    fit = fit_rigid(clean, rate, axis, c0, t0)
+    # A fit held 20 % slow (one step from a start there): far off and far worse than the winner.
+    slow = fit_rigid(clean, 0.8 * rate, axis, c0, t0, max_nfev=1, passes=0)
+    assert abs(slow.omega_rad_s - rate) > 0.15 * rate
+    assert rate_rivals(clean, fit, [fit, slow], t0, c0, 0.08) == []  # refitted, it is the winner's basin
+    # Judged from the slow fit (a winner that collapsed), the true rate fits better: it is reported.
+    rivals = rate_rivals(clean, slow, [slow, fit], t0, c0, 0.08)
+    assert len(rivals) == 1 and abs(rivals[0].omega_rad_s - rate) < 0.005 * rate
+    sigma = sigma_with_rivals(0.01, float(np.degrees(slow.omega_rad_s)), [float(np.degrees(rivals[0].omega_rad_s))])
+    assert abs(np.degrees(slow.omega_rad_s - rate)) <= 4 * sigma + 0.002
+
+
+def test_sigma_covers_the_farthest_rival() -> None:
+    assert sigma_with_rivals(0.03, 23.0, []) == 0.03
+    sigma = sigma_with_rivals(0.03, 23.0, [15.0, 30.0])
+    assert sigma >= 0.5 * 8.0
+    for truth in (15.0, 23.0, 30.0):
+        assert abs(23.0 - truth) <= 4 * sigma + 0.002
