@@ -106,7 +106,9 @@ def drop_stray_tracks(obs: Observations, fit: RigidFit, t_ref: float) -> tuple[O
     return kept, fit_rigid(kept, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
-def split_piecewise_tracks(obs: Observations, fit: RigidFit, t_ref: float) -> Observations | None:
+def split_piecewise_tracks(
+    obs: Observations, fit: RigidFit, t_ref: float, gain_out: list[float] | None = None
+) -> Observations | None:
     """``obs`` with every track that follows a rigid line only piecewise under ``fit``'s motion cut
     into its pieces; None when no track is cut.
 
@@ -120,12 +122,14 @@ def split_piecewise_tracks(obs: Observations, fit: RigidFit, t_ref: float) -> Ob
     is tested under ``fit``'s motion (ω, axis, centre and drift held): for each track of
     ``2·SPLIT_MIN_OBS`` or more observations (in time order), the split point where two lines fit
     best; the track is cut there when that lowers the least-squares χ² by over ``SPLIT_DELTA_CHI2``
-    (σ² from the fit's robust scale), and its pieces are tested again."""
+    (σ² from the fit's robust scale), and its pieces are tested again. ``gain_out``, when given,
+    is filled with the summed least-squares gain (px²) of the cuts made."""
     s2 = max(robust_scale_px(fit.residuals_px), SPLIT_MIN_SCALE_PX) ** 2
     track = obs.track.copy()
     n_new = obs.n_tracks
     pending = [np.flatnonzero(obs.track == j) for j in range(obs.n_tracks)]
     cut = False
+    gain = 0.0
     while pending:
         idx = pending.pop()
         if len(idx) < 2 * SPLIT_MIN_OBS:
@@ -143,7 +147,10 @@ def split_piecewise_tracks(obs: Observations, fit: RigidFit, t_ref: float) -> Ob
         track[tail] = n_new
         n_new += 1
         cut = True
+        gain += float(gains[k])
         pending += [head, tail]
+    if gain_out is not None:
+        gain_out[:] = [gain]
     if not cut:
         return None
     _, renumbered = np.unique(track, return_inverse=True)

@@ -9,6 +9,8 @@ carried a few steps, and the winner is the one with the lowest robust cost on a 
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from .._typing import FloatArray, Progress
@@ -63,7 +65,13 @@ RATE_RIVAL_MIN_REL = 0.05
 RATE_RIVAL_DELTA_CHI2 = 9.0
 # Rounds of cutting piecewise-rigid tracks and comparing the starts again (near the image plane).
 SPLIT_ROUNDS = 3
+# After a cut the previous finalists are refitted to the cut tracks; the whole multi-start is run
+# again only when that moves the winner's rate by over SPLIT_RESEARCH_RATE_REL or the cuts' χ² gain
+# is over SPLIT_RESEARCH_GAIN_FRAC of the winner's least-squares cost (the cut changed the problem).
+SPLIT_RESEARCH_RATE_REL = 0.05
+SPLIT_RESEARCH_GAIN_FRAC = 0.25
 Start = tuple[float, FloatArray, FloatArray]
+_log = logging.getLogger(__name__)
 
 
 def scan_subset(obs: Observations) -> Observations:
@@ -346,13 +354,31 @@ def best_of_starts_without_strays(
     compared again, up to ``SPLIT_ROUNDS`` times (the cut under a better winner finds more).
     Returns the observations kept and their fit; ``finalists_out`` as in ``best_of_starts``, from
     its last call."""
-    fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists_out)
+    finalists: list[RigidFit] = []
+    fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists)
     for _ in range(SPLIT_ROUNDS if plane_starts else 0):  # a better winner shows more switches
-        pieces = split_piecewise_tracks(obs, fit, t_ref)
+        gain: list[float] = []
+        pieces = split_piecewise_tracks(obs, fit, t_ref, gain)
         if pieces is None:
             break
         obs = pieces
-        fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists_out)
+        # The finalists refitted to the cut tracks first: a cut under a right winner (an edge bias
+        # at a silhouette) leaves the ranking as it was, and the whole multi-start is not rerun.
+        refit = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref, drift=f.drift) for f in finalists]
+        lead = refit[int(np.argmin(common_costs(refit, radius, centre)))]
+        moved = abs(lead.omega_rad_s - fit.omega_rad_s) / max(fit.omega_rad_s, 1e-12)
+        gain_frac = gain[0] / max(float(np.sum(fit.residuals_px**2)), 1e-12)
+        full = moved > SPLIT_RESEARCH_RATE_REL or gain_frac > SPLIT_RESEARCH_GAIN_FRAC
+        _log.debug(
+            "split: rate %.4f -> refit %.4f deg/s (moved %.3f), gain %.3f of cost, full search: %s",
+            np.degrees(fit.omega_rad_s), np.degrees(lead.omega_rad_s), moved, gain_frac, full,
+        )  # fmt: skip
+        if full:
+            fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists)
+        else:
+            finalists, fit = refit, lead
+    if finalists_out is not None:
+        finalists_out[:] = finalists
     kept = without_stray_tracks(obs, fit)
     if kept is None:
         return obs, fit
