@@ -105,3 +105,45 @@ def test_spliced_tracks_near_the_image_plane_do_not_pull_the_rate() -> None:
     assert abs(plain.omega_rad_s - rate) / rate > 0.02  # the spliced tracks pull a plain search off
     assert abs(fit.omega_rad_s - rate) / rate < 0.005, np.degrees(fit.omega_rad_s)
     assert len(kept.track) == len(spliced.track)
+
+
+def test_the_cut_reports_its_gain() -> None:
+    clean, spliced, truth = _spliced_tracks(3)
+    t0 = float(np.asarray(truth["t"])[0])
+    fit = fit_rigid(clean, float(truth["rate"]), np.asarray(truth["axis"]), np.asarray(truth["c0"]), t0)  # type: ignore[arg-type]
+    gain: list[float] = []
+    assert split_piecewise_tracks(clean, fit, t0, gain) is None
+    assert gain == [0.0]
+    assert split_piecewise_tracks(spliced, fit, t0, gain) is not None
+    assert gain[0] > 25.0 * 0.1**2  # over SPLIT_DELTA_CHI2 at the least scale, per cut
+
+
+def test_the_multi_start_is_run_again_after_a_cut_only_when_the_refit_finalists_ask_for_it(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # After a cut the previous finalists are refitted to the pieces first; the whole multi-start is
+    # run again only when the winner's rate moves or the cut's gain is a large part of the cost.
+    import tumblescan.spin_rate.search as search
+
+    _, spliced, truth = _spliced_tracks(3)
+    t0 = float(np.asarray(truth["t"])[0])
+    c0 = np.asarray(truth["c0"])
+    w_lo, w_hi = np.radians(0.5), np.radians(60.0)
+    ladder = plane_ladder_starts(spliced, w_lo, w_hi, c0, 0.08, t0)
+    start = [(float(truth["rate"]), np.asarray(truth["axis"]), c0)]  # type: ignore[arg-type]
+    calls: list[int] = []
+    real = search.best_of_starts
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(len(args[0].track))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(search, "best_of_starts", counted)
+    monkeypatch.setattr(search, "SPLIT_RESEARCH_RATE_REL", np.inf)
+    monkeypatch.setattr(search, "SPLIT_RESEARCH_GAIN_FRAC", np.inf)
+    finalists: list = []
+    _, never = search.best_of_starts_without_strays(spliced, start, t0, w_lo, w_hi, c0, 0.08, ladder, finalists)
+    assert len(calls) == 1  # the cut was made, but the refit finalists were kept
+    assert any(f is never for f in finalists)
+    calls.clear()
+    monkeypatch.setattr(search, "SPLIT_RESEARCH_GAIN_FRAC", -1.0)
+    search.best_of_starts_without_strays(spliced, start, t0, w_lo, w_hi, c0, 0.08, ladder)
+    assert len(calls) >= 2  # every cut: the whole multi-start again
