@@ -24,11 +24,10 @@ from tumblescan.linescan.dense.matching import CAUCHY_C, linearize, match, weigh
 from tumblescan.linescan.dense.refine import refine_dense
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, prepare
-from tumblescan.linescan.validation import axis_sigma_rad
 from tumblescan.target import shapes as shapes_mod
 
 from ..common import table
-from .dense_bound import _body_frame, dense_bound, face_of_hits
+from .dense_bound import _body_frame, dense_bound, face_of_hits, motion_sigmas_deg
 from .real_shapes import shape_named
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
@@ -75,16 +74,6 @@ def part_of_hits(scene: Scene, motion: Any, sim: Any, part_of_tri: np.ndarray) -
     tri = rc.compute_closest_points(o3d.core.Tensor(body.astype(np.float32)), nthreads=0)["primitive_ids"].numpy()
     tri = tri.astype(np.int64)
     return np.where(tri < len(triangles), part_of_tri[np.minimum(tri, len(triangles) - 1)], -1)
-
-
-def sigmas_deg(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
-    deg = np.degrees
-    return {
-        "spin_axis": float(deg(axis_sigma_rad(x, cov, 0, 1))),
-        "spin_rate": float(deg(np.sqrt(cov[2, 2]))),
-        "precession_axis": float(deg(axis_sigma_rad(x, cov, 3, 4))),
-        "precession_rate": float(deg(np.sqrt(cov[5, 5]))),
-    }
 
 
 def errors_deg(x: np.ndarray, truth: np.ndarray) -> dict[str, float]:
@@ -146,7 +135,7 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
     mapping_f = LineMapping(fit.x, data.tau_s, tuple(range(9)))
     surf_f = build_surfels(data, mapping_f, noise)
     err = errors_deg(fit.x, truth_c)
-    sd = sigmas_deg(fit.x, fit.cov)
+    sd = motion_sigmas_deg(fit.x, fit.cov)
     print(f"fit: scale {fit.scale:.2f}, residuals {fit.residuals}, surfels {fit.surfels}, points {fit.points} "
           f"({100 * fit.points / len(sim.xyz_m):.0f} %), rms {1000 * fit.rms_m:.1f} mm")  # fmt: skip
     # The fit's last stage again: every other frame, the tightest gate.
@@ -174,7 +163,7 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
     from tumblescan.linescan.validation import canonical_cov
 
     def sd_of(cov: np.ndarray) -> dict[str, float]:
-        return sigmas_deg(fit.x, canonical_cov(fit.x, cov))
+        return motion_sigmas_deg(fit.x, canonical_cov(fit.x, cov))
 
     extra = {"iid": sd_of(cov_iid), "jk-patch": sd_of(cov_jk), "jk-surfel": sd_of(cov_surf)}
     centroid_var = surf_f.var_m2[m.src] / surf_f.count[m.src]

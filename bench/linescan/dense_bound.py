@@ -169,6 +169,18 @@ def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple
     return face.astype(np.int64), normals_body @ R.T
 
 
+def motion_sigmas_deg(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
+    """The 1-sigma of the spin axis, spin rate, precession axis and precession rate (deg, deg/s)
+    of the motion ``x`` with covariance ``cov`` (the motion's parameter order)."""
+    deg = np.degrees
+    return {
+        "spin_axis": float(deg(axis_sigma_rad(x, cov, 0, 1))),
+        "spin_rate": float(deg(np.sqrt(cov[2, 2]))),
+        "precession_axis": float(deg(axis_sigma_rad(x, cov, 3, 4))),
+        "precession_rate": float(deg(np.sqrt(cov[5, 5]))),
+    }
+
+
 def dense_bound(
     motion: Motion,
     scene: Scene,
@@ -236,12 +248,8 @@ def dense_bound(
     absorbed = np.einsum("fij,fjk,flk->il", F_mf[used], np.linalg.pinv(F_ff[used], rcond=1e-10, hermitian=True),
                          F_mf[used])  # fmt: skip
     cov = np.asarray(np.linalg.inv(F_mm - absorbed), dtype=np.float64)
-    deg = np.degrees
     return {
-        "spin_axis_deg": float(deg(axis_sigma_rad(x, cov, 0, 1))),
-        "spin_rate_deg_s": float(deg(np.sqrt(cov[2, 2]))),
-        "precession_axis_deg": float(deg(axis_sigma_rad(x, cov, 3, 4))),
-        "precession_rate_deg_s": float(deg(np.sqrt(cov[5, 5]))),
+        **{f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(x, cov).items()},
         "center_m": float(np.sqrt(np.trace(cov[6:9, 6:9]))),
         "points": len(xyz),
         "faces": len(used),
