@@ -95,8 +95,13 @@ class RigidModel:
         """The signed end-point distances (2·O,) px, observation-major."""
         line = self._lines(x)[-1]
         line = line / np.sqrt(line[:, 0] * line[:, 0] + line[:, 1] * line[:, 1])[:, None]
+        return np.asarray(self._ends_dot(line).ravel())
+
+    def _ends_dot(self, line: FloatArray) -> FloatArray:
+        """``e_kᵀ l`` (O, 2) for each observation's end points ``e_k = (x, y, 1)`` and line ``l`` (O, 3)
+        (written out: ``np.einsum`` costs more on these small arrays)."""
         e = self.e_h
-        return np.asarray((e[..., 0] * line[:, None, 0] + e[..., 1] * line[:, None, 1] + line[:, None, 2]).ravel())
+        return np.asarray(e[..., 0] * line[:, None, 0] + e[..., 1] * line[:, None, 1] + line[:, None, 2])
 
     def jacobian(self, x: FloatArray) -> FloatArray:
         """The analytic Jacobian (2·O, P) of ``residuals``: globals first, then 4 columns per track
@@ -121,7 +126,7 @@ class RigidModel:
         n_obs = len(self.track)
         e = self.e_h
         s = np.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2)  # (O,)
-        r = (e[..., 0] * line[:, None, 0] + e[..., 1] * line[:, None, 1] + line[:, None, 2]) / s[:, None]  # (O, 2)
+        r = self._ends_dot(line) / s[:, None]  # (O, 2)
         l12 = np.zeros_like(line)
         l12[:, :2] = line[:, :2] / s[:, None]
         g = (e - r[:, :, None] * l12[:, None, :]) / s[:, None, None]  # (O, 2, 3)
