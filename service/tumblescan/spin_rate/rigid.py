@@ -98,33 +98,45 @@ def scan_cost(
     n = obs.normals
     q = n @ c0
     dt = obs.t_s - t_ref
-    e_h = np.concatenate([obs.ends_px, np.ones((*obs.ends_px.shape[:2], 1))], axis=2)  # (O, 2, 3)
+    a = axes[:, None, :]
+    # Rodrigues split once: n turned by θ about a is n_par + n_perp cos θ + (a × n) sin θ.
+    n_par = a * (axes @ n.T)[..., None]  # (A, O, 3)
+    n_perp = n[None] - n_par
+    a_x_n = cross3(a, n[None])
+    K_inv = np.linalg.inv(obs.K)
+    c0_skew = np.array([[0.0, -c0[2], c0[1]], [c0[2], 0.0, -c0[0]], [-c0[1], c0[0], 0.0]])  # v @ c0_skew = v × c0
+    iu, ju = np.triu_indices(4)
+    u, v = obs.ends_px[None, :, :, 0], obs.ends_px[None, :, :, 1]
     out = np.empty((len(omegas), len(axes)))
     for k, w in enumerate(omegas):
-        m = _turn(axes, n[None], -w * dt)  # (A, O, 3)
+        cos = np.cos(w * dt)[None, :, None]
+        sin = np.sin(w * dt)[None, :, None]
         keep = np.ones(len(dt)) if window_deg is None else (w * dt <= np.radians(window_deg)).astype(float)
-        m = m * keep[None, :, None]
         # Conditioning: the structure is within ``radius`` of the centre, so scale X = radius·X'.
-        pi = np.concatenate([m * radius, np.broadcast_to((q * keep)[None, :, None], (*m.shape[:2], 1))], axis=2)
-        S = np.add.reduceat(pi[..., :, None] * pi[..., None, :], starts, axis=1)  # (A, T, 4, 4)
+        m = (n_par + n_perp * cos - a_x_n * sin) * (radius * keep)[None, :, None]
+        pi = np.concatenate([m, np.broadcast_to((q * keep)[None, :, None], (*m.shape[:2], 1))], axis=2)
+        S_upper = np.add.reduceat(pi[..., iu] * pi[..., ju], starts, axis=1)  # (A, T, 10): S is symmetric
+        S = np.empty((*S_upper.shape[:2], 4, 4))
+        S[..., iu, ju] = S_upper
+        S[..., ju, iu] = S_upper
         _, V = np.linalg.eigh(S)
-        pts = V[..., :2][:, obs.track]  # (A, O, 4, 2): two homogeneous points spanning the line
-        X1 = _turn(axes, pts[..., :3, 0] * radius, w * dt) + pts[..., 3, 0, None] * c0
-        X2 = _turn(axes, pts[..., :3, 1] * radius, w * dt) + pts[..., 3, 1, None] * c0
-        line = cross3(X1 @ obs.K.T, X2 @ obs.K.T)
-        line /= np.maximum(np.linalg.norm(line[..., :2], axis=-1, keepdims=True), 1e-12)
-        r = np.einsum("oki,aoi->aok", e_h, line)
+        # The line through X_k = R p_k + s_k c0 (two homogeneous points, p_k = radius·V[:3, k]) is
+        # seen along X_1 × X_2 = R (p_1 × p_2) + R (s_2 p_1 - s_1 p_2) × c0, its image K^-T of that.
+        p1, p2 = V[..., :3, 0] * radius, V[..., :3, 1] * radius  # (A, T, 3)
+        s1, s2 = V[..., 3, 0, None], V[..., 3, 1, None]
+        moment = _turn_split(a, cross3(p1, p2)[:, obs.track], cos, sin)
+        offset = _turn_split(a, (s2 * p1 - s1 * p2)[:, obs.track], cos, sin)
+        line = (moment + offset @ c0_skew) @ K_inv  # (A, O, 3): image lines, row-wise K^-T
+        r = line[..., None, 0] * u + line[..., None, 1] * v + line[..., None, 2]
+        r = r / np.maximum(np.hypot(line[..., 0], line[..., 1]), 1e-300)[..., None]
         used = max(float(keep.sum()), 1.0)
         out[k] = (np.minimum(r**2, clip_px**2) * keep[None, :, None]).sum(axis=(1, 2)) * len(dt) / used
     return out
 
 
-def _turn(axes: FloatArray, v: FloatArray, angle: FloatArray) -> FloatArray:
-    """Rodrigues for many axes (A, 3) and vectors (A or 1, O, 3) by angles (O,) -> (A, O, 3)."""
-    c = np.cos(angle)[None, :, None]
-    s = np.sin(angle)[None, :, None]
-    a = axes[:, None, :]
-    return np.asarray(v * c + cross3(a, v) * s + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - c)), dtype=float)
+def _turn_split(a: FloatArray, v: FloatArray, cos: FloatArray, sin: FloatArray) -> FloatArray:
+    """Rodrigues for axes ``a`` (A, 1, 3), vectors ``v`` (A, O, 3), the angles' ``cos``, ``sin`` (1, O, 1)."""
+    return np.asarray(v * cos + cross3(a, v) * sin + a * (np.sum(a * v, axis=-1, keepdims=True) * (1 - cos)))
 
 
 def init_structure(
