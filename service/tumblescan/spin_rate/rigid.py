@@ -14,6 +14,7 @@ eigenvalue of their scatter is the track's cost (variable projection, linear in 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -47,6 +48,15 @@ class Observations:
     def n_tracks(self) -> int:
         return int(self.track.max()) + 1 if len(self.track) else 0
 
+    @cached_property
+    def track_starts(self) -> IntArray:
+        """The index of each track's first observation (``track`` is sorted)."""
+        return np.flatnonzero(np.concatenate([[True], self.track[1:] != self.track[:-1]]))
+
+    @cached_property
+    def K_inv(self) -> FloatArray:
+        return np.asarray(np.linalg.inv(self.K), dtype=float)
+
 
 @dataclass(frozen=True)
 class RigidFit:
@@ -77,6 +87,9 @@ def fibonacci_sphere(n: int) -> FloatArray:
     return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
 
 
+_UPPER_4X4 = np.triu_indices(4)
+
+
 def scan_cost(
     obs: Observations,
     omegas: FloatArray,
@@ -94,7 +107,7 @@ def scan_cost(
     distance to that line re-projected at its time, squared and clipped at ``clip_px``, is summed.
     With ``window_deg`` only the observations within that much rotation of ``t_ref`` count (the
     cost per observation, times their total): a short arc has wider basins for the search."""
-    starts = np.flatnonzero(np.r_[True, obs.track[1:] != obs.track[:-1]])
+    starts = obs.track_starts
     n = obs.normals
     q = n @ c0
     dt = obs.t_s - t_ref
@@ -103,9 +116,9 @@ def scan_cost(
     n_par = a * (axes @ n.T)[..., None]  # (A, O, 3)
     n_perp = n[None] - n_par
     a_x_n = cross3(a, n[None])
-    K_inv = np.linalg.inv(obs.K)
+    K_inv = obs.K_inv
     c0_skew = np.array([[0.0, -c0[2], c0[1]], [c0[2], 0.0, -c0[0]], [-c0[1], c0[0], 0.0]])  # v @ c0_skew = v × c0
-    iu, ju = np.triu_indices(4)
+    iu, ju = _UPPER_4X4
     u, v = obs.ends_px[None, :, :, 0], obs.ends_px[None, :, :, 1]
     out = np.empty((len(omegas), len(axes)))
     for k, w in enumerate(omegas):
@@ -217,63 +230,79 @@ def fit_rigid(
 def _uncertainty(model: RigidModel, x: FloatArray, r: FloatArray, w: FloatArray) -> tuple[float, FloatArray]:
     """σ_ω (rad/s) and the axis tangents' covariance (2, 2) (rad²) of a converged fit at ``x``,
     with residuals ``r`` (2·O,) px and Cauchy weights ``w`` (2·O,): the larger of the Gauss-Newton,
-    cluster-robust and track-jackknife σ."""
-    J = model.jacobian(x)
-    track = model.track
-    n_par = J.shape[1]
-    s2 = float(np.sum(w * r**2) / max(np.sum(w) - n_par, 1.0))
-    JW = J * np.sqrt(w)[:, None]
-    H_inv = np.linalg.pinv(JW.T @ JW, rcond=1e-10, hermitian=True)
-    cov = H_inv * s2
+    cluster-robust and track-jackknife σ (``covariances``)."""
+    cov_gn, cov_cluster, sigma_jk = covariances(model, x, r, w)
     # Cluster-robust (sandwich) covariance with one cluster per track: an edge's bias (shading, PSF,
     # a neighbouring edge) persists from frame to frame, which the independent-noise σ ignores.
     # The larger of the two is reported.
-    G = int(track.max()) + 1
-    g = np.zeros((G, n_par))
-    np.add.at(g, np.repeat(track, 2), J * (w * r)[:, None])
-    cov_cluster = H_inv @ (g.T @ g) @ H_inv * G / max(G - 1, 1)
-    cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov)[:, None], cov_cluster, cov)
-    sigma_jk = track_jackknife_sigma(JW, np.sqrt(w) * r, track, model.n_global)
+    cov = np.where(np.diag(cov_cluster)[:, None] > np.diag(cov_gn)[:, None], cov_cluster, cov_gn)
     return max(float(np.sqrt(max(cov[0, 0], 0.0))), sigma_jk), np.asarray(cov[1:3, 1:3], dtype=float)
 
 
-def track_jackknife_sigma(JW: FloatArray, rw: FloatArray, track: IntArray, n_global: int) -> float:
-    """The delete-one-track jackknife σ of ω (rad/s), each deletion by one Gauss-Newton step.
+def covariances(model: RigidModel, x: FloatArray, r: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """The global parameters' Gauss-Newton covariance ``s² S⁺`` and cluster-robust (one cluster per
+    track) covariance ``S⁺ (Σ s_j s_jᵀ) S⁺ · G/(G-1)``, both (n_global, n_global), and the track
+    jackknife's σ_ω (rad/s), at a converged ``x`` with residuals ``r`` (2·O,) px and weights ``w``.
 
-    Each track j's 4 line parameters are eliminated (Schur complement), leaving its contribution
-    ``S_j = A_j - B_j C_j⁺ B_jᵀ`` to the global normal matrix and ``s_j = q_g - B_j C_j⁺ q_l`` to the
-    global score (``q = J_jᵀ r_j``, weighted). At the optimum ``Σ s_j = 0``, so without track j the
-    global parameters move by ``Δ_j = (S - S_j)⁺ s_j``, ``S = Σ S_j``, and
-    ``σ² = (G-1)/G · Σ_j (Δ_j,ω - mean Δ_ω)²``. Unlike the sandwich ``S⁻¹ (Σ s_j s_jᵀ) S⁻¹`` it
-    weighs a track by what the others lose without it: a few tracks that hold the rate (short
-    arcs, few long edges) widen σ as they should.
+    Each track's 4 line parameters are eliminated (``TrackSchur``). ω and the axis do not move along
+    the scale gauge (``RigidModel.gauge``), so their (co)variances are the same whichever
+    generalised inverse of the full normal matrix is taken."""
+    J_global, J_line = model.jacobian_blocks(x)
+    sw = np.sqrt(w)
+    schur = TrackSchur.build(sw[:, None] * J_global, sw[:, None] * J_line, sw * r, np.repeat(model.track, 2))
+    G = schur.n_tracks
+    s2 = float(np.sum(w * r**2) / max(np.sum(w) - model.n_global - 4 * G, 1.0))
+    S_inv = np.linalg.pinv(schur.S, rcond=1e-10, hermitian=True)
+    cov_cluster = S_inv @ (schur.s_parts.T @ schur.s_parts) @ S_inv * G / max(G - 1, 1)
+    return np.asarray(S_inv * s2, dtype=float), cov_cluster, schur.jackknife_sigma()
 
-    Parameters
-    ----------
-    JW : (2·O, P) weighted Jacobian (global parameters first, then 4 per track, in track order).
-    rw : (2·O,) weighted residuals (px); track : (O,) track of each observation.
-    n_global : number of global parameters (ω first).
-    """
-    G = int(track.max()) + 1
-    if G < 3:
-        return float("inf")
-    # The pseudo-inverses are taken in two stacked calls (the same LAPACK call per matrix, without
-    # numpy's per-call overhead, which was most of this function's time).
-    rows = np.repeat(track, 2)
-    sels = [rows == j for j in range(G)]
-    Jg = [JW[sel, :n_global] for sel in sels]
-    Jl = [JW[sel, n_global + 4 * j : n_global + 4 * j + 4] for j, sel in enumerate(sels)]
-    rw_j = [rw[sel] for sel in sels]
-    C_inv = np.linalg.pinv(np.array([Jl_j.T @ Jl_j for Jl_j in Jl]), rcond=1e-12, hermitian=True)
-    S_parts, s_parts = [], []
-    for j in range(G):
-        B = Jg[j].T @ Jl[j]
-        S_parts.append(Jg[j].T @ Jg[j] - B @ C_inv[j] @ B.T)
-        s_parts.append(Jg[j].T @ rw_j[j] - B @ C_inv[j] @ (Jl[j].T @ rw_j[j]))
-    S = np.sum(S_parts, axis=0)
-    S_without = np.linalg.pinv(S - np.array(S_parts), rcond=1e-10, hermitian=True)  # (G, n_global, n_global)
-    delta = np.array([S_without[j][0] @ s_parts[j] for j in range(G)])
-    return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
+
+@dataclass(frozen=True)
+class TrackSchur:
+    """The weighted normal equations with each track's 4 line parameters eliminated: track j's
+    part of the global normal matrix ``S_j = A_j - B_j C_j⁺ B_jᵀ`` (G, n, n) and of the global
+    score ``s_j = q_g - B_j C_j⁺ q_l`` (G, n), from ``A_j = J_gᵀ J_g``, ``B_j = J_gᵀ J_l``,
+    ``C_j = J_lᵀ J_l``, ``q = Jᵀ r`` over the track's rows."""
+
+    S_parts: FloatArray
+    s_parts: FloatArray
+
+    @staticmethod
+    def build(JW_global: FloatArray, JW_line: FloatArray, rw: FloatArray, row_track: IntArray) -> TrackSchur:
+        """``JW_global`` (R, n), ``JW_line`` (R, 4): the weighted Jacobian's blocks (each row's own
+        track's line columns); ``rw`` (R,) weighted residuals (px); ``row_track`` (R,) sorted."""
+        starts = np.flatnonzero(np.concatenate([[True], row_track[1:] != row_track[:-1]]))
+        A = np.add.reduceat(JW_global[:, :, None] * JW_global[:, None, :], starts)
+        B = np.add.reduceat(JW_global[:, :, None] * JW_line[:, None, :], starts)
+        C = np.add.reduceat(JW_line[:, :, None] * JW_line[:, None, :], starts)
+        q_g = np.add.reduceat(JW_global * rw[:, None], starts)
+        q_l = np.add.reduceat(JW_line * rw[:, None], starts)
+        BC = B @ np.linalg.pinv(C, rcond=1e-12, hermitian=True)  # (G, n, 4)
+        S_parts = A - BC @ B.transpose(0, 2, 1)
+        s_parts = q_g - (BC @ q_l[:, :, None])[:, :, 0]
+        return TrackSchur(S_parts, s_parts)
+
+    @property
+    def n_tracks(self) -> int:
+        return len(self.S_parts)
+
+    @property
+    def S(self) -> FloatArray:
+        return np.asarray(self.S_parts.sum(axis=0))
+
+    def jackknife_sigma(self) -> float:
+        """The delete-one-track jackknife σ of ω (rad/s), each deletion by one Gauss-Newton step.
+
+        At the optimum ``Σ s_j = 0``, so without track j the global parameters move by
+        ``Δ_j = (S - S_j)⁺ s_j``, and ``σ² = (G-1)/G · Σ_j (Δ_j,ω - mean Δ_ω)²``. Unlike the sandwich
+        ``S⁻¹ (Σ s_j s_jᵀ) S⁻¹`` it weighs a track by what the others lose without it: a few tracks
+        that hold the rate (short arcs, few long edges) widen σ as they should. ∞ under 3 tracks."""
+        G = self.n_tracks
+        if G < 3:
+            return float("inf")
+        S_without = np.linalg.pinv(self.S - self.S_parts, rcond=1e-10, hermitian=True)  # (G, n, n)
+        delta = np.einsum("gk,gk->g", S_without[:, 0], self.s_parts)
+        return float(np.sqrt((G - 1) / G * np.sum((delta - delta.mean()) ** 2)))
 
 
 def robust_scale_px(residuals_px: FloatArray) -> float:
