@@ -10,11 +10,13 @@ carried a few steps, and the winner is the one with the lowest robust cost on a 
 from __future__ import annotations
 
 import logging
+from functools import partial
 
 import numpy as np
 
 from .._typing import FloatArray, Progress
 from ..geometry.rotations import tangent_basis
+from ..numerics.parallel import cores, parallel_map
 from .association import split_piecewise_tracks, without_stray_tracks
 from .rigid import (
     Observations,
@@ -105,13 +107,11 @@ def scan_starts(
     best few basins (and the periodogram's peaks) polished by Nelder-Mead over (ω, axis, c0_xy).
     Without a sense from the image rotation (the axis may lie near the image plane) a dense set of
     image-plane axes joins the sphere."""
-    from scipy.optimize import minimize
-
     sub = scan_subset(obs)
     axes = fibonacci_sphere(SCAN_AXES)
     # With a sense: the hemisphere the image rotation points to (and a band along the image plane).
     axes = axes[sense_hint * axes[:, 2] > -0.15] if sense_hint else np.vstack([axes, plane_axes()])
-    C = scan_cost(sub, omegas, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
+    C = scan_grid(sub, omegas, axes, c0, t_ref, radius)
     progress("scan", 0.7)
     cands = [(float(omegas[k]), axes[a]) for k, a in _basins(C, 3)]
     if not sense_hint:  # the best basins among the image-plane axes alone, which the sphere's outshine
@@ -120,25 +120,48 @@ def scan_starts(
     for w in coarse:
         k = int(np.argmin(np.abs(omegas - w)))
         cands.append((w, axes[int(np.argmin(C[k]))]))
+    polished = parallel_map(partial(_polished, sub, c0=c0, t_ref=t_ref, radius=radius), cands)
+    polished.sort(key=lambda p: p[0])
+    return [(w, a, c) for _, w, a, c in polished[: 3 + (0 if sense_hint else 2)]]
 
-    def cost(x: FloatArray, a0: FloatArray) -> float:
+
+def scan_grid(
+    obs: Observations, omegas: FloatArray, axes: FloatArray, c0: FloatArray, t_ref: float, radius: float
+) -> FloatArray:
+    """``scan_cost`` (len(omegas), len(axes)) at ``SCAN_CLIP_PX``, the rates in as many blocks as
+    there are cores (``numerics.parallel``)."""
+    blocks = [b for b in np.array_split(omegas, min(cores(), len(omegas))) if len(b)]
+    rows = parallel_map(partial(_scan_block, obs, axes=axes, c0=c0, t_ref=t_ref, radius=radius), blocks)
+    return np.vstack(rows)
+
+
+def _scan_block(
+    obs: Observations, omegas: FloatArray, *, axes: FloatArray, c0: FloatArray, t_ref: float, radius: float
+) -> FloatArray:
+    return scan_cost(obs, omegas, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
+
+
+def _polished(
+    sub: Observations, cand: tuple[float, FloatArray], *, c0: FloatArray, t_ref: float, radius: float
+) -> tuple[float, float, FloatArray, FloatArray]:
+    """A scan basin ``(ω, axis)`` polished by Nelder-Mead over (ω, axis, c0_xy): (cost, ω, axis, c0)."""
+    from scipy.optimize import minimize
+
+    w0, a0 = cand
+
+    def cost(x: FloatArray) -> float:
         a = a0 + np.array([x[1], x[2], x[3]])
         a = a / np.linalg.norm(a)
         c = np.array([c0[0] + x[4], c0[1] + x[5], 1.0])
         return float(scan_cost(sub, np.array([x[0]]), a[None], c, t_ref, radius, clip_px=SCAN_CLIP_PX)[0, 0])
 
-    polished: list[tuple[float, float, FloatArray, FloatArray]] = []
-    for w0, a0 in cands:
-        x0 = np.array([w0, 0, 0, 0, 0, 0])
-        simplex = x0 + np.vstack([np.zeros(6), np.diag([0.05 * w0, 0.15, 0.15, 0.15, radius * 0.2, radius * 0.2])])
-        r = minimize(cost, x0, args=(a0,), method="Nelder-Mead",
-                     options={"initial_simplex": simplex, "maxfev": 250, "xatol": 1e-6, "fatol": 1e-3})  # fmt: skip
-        a = a0 + r.x[1:4]
-        a = a / np.linalg.norm(a)
-        c = np.array([c0[0] + r.x[4], c0[1] + r.x[5], 1.0])
-        polished.append((float(r.fun), float(r.x[0]), a, c))
-    polished.sort(key=lambda p: p[0])
-    return [(w, a, c) for _, w, a, c in polished[: 3 + (0 if sense_hint else 2)]]
+    x0 = np.array([w0, 0, 0, 0, 0, 0])
+    simplex = x0 + np.vstack([np.zeros(6), np.diag([0.05 * w0, 0.15, 0.15, 0.15, radius * 0.2, radius * 0.2])])
+    r = minimize(cost, x0, method="Nelder-Mead",
+                 options={"initial_simplex": simplex, "maxfev": 250, "xatol": 1e-6, "fatol": 1e-3})  # fmt: skip
+    a = a0 + r.x[1:4]
+    a = a / np.linalg.norm(a)
+    return float(r.fun), float(r.x[0]), a, np.array([c0[0] + r.x[4], c0[1] + r.x[5], 1.0])
 
 
 def line_angle_rate_rad_s(obs: Observations) -> float | None:
