@@ -8,7 +8,8 @@ numpy calls that hold the GIL, so threads would not run them side by side. loky 
 workers by fork + exec (a fork would copy this process's BLAS and OpenCV threads in an unknown
 state), does not re-run a script's ``__main__``, keeps the workers between calls and lets them go
 after ``IDLE_TIMEOUT_S``. Each worker gets one BLAS thread. If the pool breaks (a worker killed),
-the calls run here instead.
+the calls run here instead. A daemonic process may not have children (the service's queue workers
+are daemonic), so there the calls run in turn as well: the service spreads jobs, not a job's steps.
 """
 
 from __future__ import annotations
@@ -39,8 +40,10 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """``[fn(x) for x in items]``, the calls spread over ``cores()`` processes when there are more
     than one and at least two items. ``fn`` and the items must pickle (a module-level function,
     or a ``functools.partial`` of one); results come back in order."""
+    import multiprocessing
+
     n = cores()
-    if n < 2 or len(items) < 2:
+    if n < 2 or len(items) < 2 or multiprocessing.current_process().daemon:
         return [fn(x) for x in items]
     from loky import get_reusable_executor
     from loky.process_executor import BrokenProcessPool
