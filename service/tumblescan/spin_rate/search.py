@@ -42,6 +42,10 @@ SHORT_NFEV = 25
 FINALISTS = 3
 SAME_RATE_REL = 0.01
 SAME_AXIS_DEG = 3.0
+# Converged fits this close (rate, axis with sense, cost) are one minimum reached twice (near the
+# image plane two or three finalists often end there): it is restarted and polished once.
+SAME_MINIMUM_REL = 1e-5
+SAME_MINIMUM_AXIS_DEG = 0.01
 # A fit whose lines lie mostly farther from the centre than the target's size is implausible: a
 # slow rate with the lines far away mimics the image motion of a fast one near the centre.
 MAX_LINE_DISTANCE_RADII = 2.0
@@ -317,7 +321,7 @@ def best_of_starts(
                 finalists.append(f)
     done = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref) for f in finalists]
     if plane_starts:
-        done = [_restarted(obs, f, t_ref) for f in done]
+        done = _distinct_minima([_restarted(obs, f, t_ref) for f in _distinct_minima(done)])
         is_near = [los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG for f in done]
         done = [_axis_polished(obs, f, t_ref) if n else f for f, n in zip(done, is_near, strict=True)]
     best = done[int(np.argmin(common_costs(done, radius, centre)))]
@@ -385,27 +389,34 @@ def best_of_starts_without_strays(
         if pieces is None:
             break
         obs = pieces
-        # The finalists refitted to the cut tracks first: a cut under a right winner (an edge bias
-        # at a silhouette) leaves the ranking as it was, and the whole multi-start is not rerun.
-        refit = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref, drift=f.drift) for f in finalists]
-        lead = refit[int(np.argmin(common_costs(refit, radius, centre)))]
-        moved = abs(lead.omega_rad_s - fit.omega_rad_s) / max(fit.omega_rad_s, 1e-12)
         gain_frac = gain[0] / max(float(np.sum(fit.residuals_px**2)), 1e-12)
-        full = moved > SPLIT_RESEARCH_RATE_REL or gain_frac > SPLIT_RESEARCH_GAIN_FRAC
-        _log.debug(
-            "split: rate %.4f -> refit %.4f deg/s (moved %.3f), gain %.3f of cost, full search: %s",
-            np.degrees(fit.omega_rad_s), np.degrees(lead.omega_rad_s), moved, gain_frac, full,
-        )  # fmt: skip
-        if full:
-            fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists)
-        else:
+        # The finalists refitted to the cut tracks first: a cut under a right winner (an edge bias
+        # at a silhouette) leaves the ranking as it was, and the whole multi-start is not rerun. A
+        # gain over SPLIT_RESEARCH_GAIN_FRAC reruns it whatever the refits give: they are skipped.
+        refit, lead = None, fit
+        if gain_frac <= SPLIT_RESEARCH_GAIN_FRAC:
+            refit, lead = _refitted_lead(obs, finalists, t_ref, centre, radius)
+        moved = np.inf if refit is None else abs(lead.omega_rad_s - fit.omega_rad_s) / max(fit.omega_rad_s, 1e-12)
+        _log.debug("split: gain %.3f of cost, rate moved %.3f by the refits", gain_frac, moved)
+        if refit is not None and moved <= SPLIT_RESEARCH_RATE_REL:
             finalists, fit = refit, lead
+        else:
+            fit = best_of_starts(obs, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists)
     if finalists_out is not None:
         finalists_out[:] = finalists
     kept = without_stray_tracks(obs, fit)
     if kept is None:
         return obs, fit
     return kept, best_of_starts(kept, starts, t_ref, w_lo, w_hi, centre, radius, plane_starts, finalists_out)
+
+
+def _refitted_lead(
+    obs: Observations, finalists: list[RigidFit], t_ref: float, centre: FloatArray, radius: float
+) -> tuple[list[RigidFit], RigidFit]:
+    """``finalists`` refitted to ``obs`` from their own rate, axis and centre, and the best of them
+    (common-scale cost, plausible)."""
+    refit = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref, drift=f.drift) for f in finalists]
+    return refit, refit[int(np.argmin(common_costs(refit, radius, centre)))]
 
 
 def rate_rivals(
@@ -436,6 +447,23 @@ def rate_rivals(
         if np.isfinite(cost[1]) and 2.0 * (cost[1] - cost[0]) / s2 < RATE_RIVAL_DELTA_CHI2:
             rivals.append(again)
     return sorted(rivals, key=lambda r: -abs(r.omega_rad_s - fit.omega_rad_s))
+
+
+def _distinct_minima(fits: list[RigidFit]) -> list[RigidFit]:
+    """``fits`` without those that sit at the minimum of an earlier one (``SAME_MINIMUM_REL`` in
+    rate and cost, ``SAME_MINIMUM_AXIS_DEG`` in axis): refitting or polishing such a copy only
+    finds that minimum again."""
+    cos_max = np.cos(np.radians(SAME_MINIMUM_AXIS_DEG))
+    out: list[RigidFit] = []
+    for f in fits:
+        if not any(
+            abs(f.omega_rad_s - g.omega_rad_s) <= SAME_MINIMUM_REL * max(f.omega_rad_s, g.omega_rad_s)
+            and abs(f.cost - g.cost) <= SAME_MINIMUM_REL * max(f.cost, g.cost)
+            and float(f.axis @ g.axis) >= cos_max
+            for g in out
+        ):
+            out.append(f)
+    return out
 
 
 def _same_basin(a: RigidFit, b: RigidFit) -> bool:
