@@ -55,3 +55,24 @@ def test_slow_starts_tilted_toward_the_line_of_sight_do_not_hide_the_image_plane
     rate = float(truth["rate"])
     assert abs(fit.omega_rad_s - rate) / rate < 0.01, np.degrees(fit.omega_rad_s)
     assert los_angle_deg(fit.axis) > 80.0
+
+
+def test_one_minimum_reached_by_several_finalists_is_kept_once() -> None:
+    # Near the image plane two or three finalists often converge to one minimum; it is restarted
+    # and polished once. Fits apart by more than the rounding of one minimum are all kept.
+    from dataclasses import replace
+
+    from tumblescan.spin_rate.rigid import fit_rigid
+    from tumblescan.spin_rate.search import _distinct_minima
+
+    axis = unit_from_angles(np.radians(87.0), np.radians(30.0))
+    obs, truth = _flat_spin_tracks(5, axis, 20.0)
+    fit = fit_rigid(obs, float(truth["rate"]), axis, np.asarray(truth["c0"]), float(np.asarray(truth["t"])[0]))
+    w = fit.omega_rad_s
+    copy = replace(fit, omega_rad_s=w * (1 + 1e-7), cost=fit.cost * (1 + 1e-7))
+    kept = _distinct_minima([fit, copy])
+    assert len(kept) == 1 and kept[0] is fit
+    other_rate = replace(fit, omega_rad_s=w * 1.001)
+    a = fit.axis + np.array([0.0, 0.0, 0.003])
+    other_axis = replace(fit, axis=a / np.linalg.norm(a))
+    assert len(_distinct_minima([fit, copy, other_rate, other_axis])) == 3
