@@ -204,7 +204,7 @@ def plane_ladder_starts(
     n = int(np.floor(np.log(w_hi / w_lo) / np.log(PLANE_LADDER_RATIO))) + 1 if w_hi > w_lo else 1
     rates = np.asarray(w_lo * PLANE_LADDER_RATIO ** np.arange(n), dtype=np.float64)
     axes = plane_axes()
-    C = scan_cost(scan_subset(obs), rates, axes, c0, t_ref, radius, clip_px=SCAN_CLIP_PX)
+    C = scan_grid(scan_subset(obs), rates, axes, c0, t_ref, radius)
     return [(float(w), axes[int(np.argmin(row))], c0) for w, row in zip(rates, C, strict=True)]
 
 
@@ -288,9 +288,13 @@ def best_of_starts(
     (without twins: near the image plane the twin is the same axis line), and the best short fit
     with its axis near the image plane is a finalist too. ``finalists_out``, when given, is
     filled with every converged finalist (the winner among them), for ``rate_rivals``."""
-    trials = [_short_fit(obs, w0, a0, cc, t_ref) for w0, a0, cc in starts]
-    trials += [_short_fit(obs, f.omega_rad_s, mirror_twin(f.axis), f.c0, t_ref) for f in trials]
-    trials += [_short_fit(obs, w0, a0, cc, t_ref) for w0, a0, cc in plane_starts or []]
+    # Independent fits run side by side (numerics.parallel); the order of every list is kept.
+    short = partial(_fit_from, obs, t_ref=t_ref, short=True)
+    plane_starts = plane_starts or []
+    first = parallel_map(short, [*starts, *plane_starts])
+    trials = first[: len(starts)]
+    trials += parallel_map(short, [(f.omega_rad_s, mirror_twin(f.axis), f.c0) for f in trials])
+    trials += first[len(starts) :]
     lead = trials[int(np.argmin(common_costs(trials, radius, centre)))]
     scan_obs = scan_subset(obs)
     axes = fibonacci_sphere(SCAN_AXES)
@@ -319,11 +323,10 @@ def best_of_starts(
             if los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG and all(not _same_basin(f, g) for g in finalists):
                 near.append(f)
                 finalists.append(f)
-    done = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref) for f in finalists]
+    done = parallel_map(partial(_fit_from, obs, t_ref=t_ref), [(f.omega_rad_s, f.axis, f.c0) for f in finalists])
     if plane_starts:
-        done = _distinct_minima([_restarted(obs, f, t_ref) for f in _distinct_minima(done)])
-        is_near = [los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG for f in done]
-        done = [_axis_polished(obs, f, t_ref) if n else f for f, n in zip(done, is_near, strict=True)]
+        done = _distinct_minima(parallel_map(partial(_restarted, obs, t_ref=t_ref), _distinct_minima(done)))
+        done = parallel_map(partial(_polished_if_near, obs, t_ref=t_ref), done)
     best = done[int(np.argmin(common_costs(done, radius, centre)))]
     # The winner's weak-perspective twin, started from the converged rate: a short fit's twin was
     # taken from a rate and axis still far off, and so may have missed the twin basin. Not when
@@ -338,9 +341,24 @@ def best_of_starts(
     return done[int(np.argmin(common_costs(done, radius, centre)))]
 
 
+def _fit_from(obs: Observations, start: Start, *, t_ref: float, short: bool = False) -> RigidFit:
+    """The fit from ``start`` (ω, axis, c0): converged, or ``_short_fit``."""
+    w0, a0, c0 = start
+    return _short_fit(obs, w0, a0, c0, t_ref) if short else fit_rigid(obs, w0, a0, c0, t_ref)
+
+
+def _polished_if_near(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
+    """``_axis_polished`` for a fit with its axis near the image plane, else the fit."""
+    return _axis_polished(obs, fit, t_ref) if los_angle_deg(fit.axis) >= PLANE_FINALIST_MIN_LOS_DEG else fit
+
+
 def _short_fit(obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float) -> RigidFit:
     """A fit carried ``SHORT_NFEV`` steps, one robust pass, without σ: it only ranks basins."""
     return fit_rigid(obs, omega0, axis0, c0, t_ref, max_nfev=SHORT_NFEV, passes=1, uncertainty=False)
+
+
+def _refit(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
+    return fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
 def _restarted(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
@@ -415,7 +433,7 @@ def _refitted_lead(
 ) -> tuple[list[RigidFit], RigidFit]:
     """``finalists`` refitted to ``obs`` from their own rate, axis and centre, and the best of them
     (common-scale cost, plausible)."""
-    refit = [fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref, drift=f.drift) for f in finalists]
+    refit = parallel_map(partial(_refit, obs, t_ref=t_ref), finalists)
     return refit, refit[int(np.argmin(common_costs(refit, radius, centre)))]
 
 
