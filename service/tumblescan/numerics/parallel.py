@@ -21,7 +21,9 @@ from typing import TypeVar
 T = TypeVar("T")
 R = TypeVar("R")
 
-IDLE_TIMEOUT_S = 300
+# loky's default. A process that forked this one (a bench's pool worker) waits for its children at exit,
+# the pool's workers among them, until they time out.
+IDLE_TIMEOUT_S = 10
 _ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
