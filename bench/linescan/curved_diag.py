@@ -20,14 +20,14 @@ import numpy as np
 from tumblescan import Scanner, Scene, random_motion, simulate_frames
 from tumblescan.linescan.dense.covariance import cauchy_curvature, patches, sandwich
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
-from tumblescan.linescan.dense.matching import CAUCHY_C, linearize, match, weights
+from tumblescan.linescan.dense.matching import CAUCHY_C, weights
 from tumblescan.linescan.dense.refine import refine_dense
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, prepare
 from tumblescan.target import shapes as shapes_mod
 
 from ..common import table
-from .dense_bound import _body_frame, dense_bound, face_of_hits, motion_sigmas_deg
+from .dense_bound import _body_frame, dense_bound, face_of_hits, last_stage_matches, motion_sigmas_deg
 from .real_shapes import shape_named
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
@@ -139,14 +139,7 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
     print(f"fit: scale {fit.scale:.2f}, residuals {fit.residuals}, surfels {fit.surfels}, points {fit.points} "
           f"({100 * fit.points / len(sim.xyz_m):.0f} %), rms {1000 * fit.rms_m:.1f} mm")  # fmt: skip
     # The fit's last stage again: every other frame, the tightest gate.
-    cells = np.flatnonzero(surf_f.planar)
-    F = data.n_frames
-    own = data.cell_frame[cells]
-    src = np.repeat(cells, F - 1)
-    partner = ((own[:, None] + np.arange(1, F)[None, :]) % F).ravel()
-    gate = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
-    m = match(data, mapping_f, surf_f, src, partner, gate)
-    lin = linearize(data, mapping_f, surf_f, m, noise)
+    m, lin = last_stage_matches(data, mapping_f, surf_f, noise)
     _, scale = weights(lin)
     e = lin.r / np.sqrt(lin.var)
     c = CAUCHY_C * scale

@@ -38,9 +38,10 @@ from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.matching import Linearized, Matches, linearize, match
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, normal_variance, prepare
-from tumblescan.linescan.sensor import perpendiculars
+from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels, normal_variance, prepare
+from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad
 from tumblescan.target.motion import apply_rotation
@@ -273,3 +274,18 @@ def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     surf = build_surfels(data, mapping, noise)
     used[kept] = surf.planar[surf.point_cell]  # with the points handed over to their faces' surfels
     return used
+
+
+def last_stage_matches(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise
+) -> tuple[Matches, Linearized]:
+    """The refinement's last stage again at ``mapping``: every planar surfel matched in every other
+    frame with the tightest gate, and the residuals linearised."""
+    cells = np.flatnonzero(surf.planar)
+    F = data.n_frames
+    own = data.cell_frame[cells]
+    src = np.repeat(cells, F - 1)
+    partner = ((own[:, None] + np.arange(1, F)[None, :]) % F).ravel()
+    gate = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
+    mt = match(data, mapping, surf, src, partner, gate)
+    return mt, linearize(data, mapping, surf, mt, noise)

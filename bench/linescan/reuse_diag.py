@@ -27,14 +27,14 @@ import numpy as np
 from tumblescan import Scanner, Scene, random_motion, simulate_frames
 from tumblescan.linescan.dense.covariance import patches, sandwich
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
-from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, linearize, match, robust_sigma
+from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels, prepare
 from tumblescan.linescan.sensor import SensorNoise
 from tumblescan.linescan.validation import canonical_cov
 
 from ..common import table
-from .dense_bound import dense_bound, face_of_hits, motion_sigmas_deg
+from .dense_bound import dense_bound, face_of_hits, last_stage_matches, motion_sigmas_deg
 from .real_shapes import shape_named
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
@@ -83,13 +83,7 @@ def designs(
 ) -> tuple[dict[str, dict[str, np.ndarray]], str]:
     """Every design's :func:`analyse` on the last stage's matches at ``mapping``, and a summary line."""
     cells = np.flatnonzero(surf.planar)
-    F = data.n_frames
-    own = data.cell_frame[cells]
-    src = np.repeat(cells, F - 1)
-    partner = ((own[:, None] + np.arange(1, F)[None, :]) % F).ravel()
-    gate = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
-    mt = match(data, mapping, surf, src, partner, gate)
-    lin = linearize(data, mapping, surf, mt, noise)
+    mt, lin = last_stage_matches(data, mapping, surf, noise)
     m = len(surf.count)
     n = len(lin.r)
     d = surf.var_m2 / np.maximum(surf.count, 1)
