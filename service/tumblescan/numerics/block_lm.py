@@ -48,6 +48,26 @@ class BlockLMResult:
         return 1 <= self.status <= 4
 
 
+def block_starts(row_block: IntArray) -> IntArray:
+    """The index of each block's first row (``row_block`` non-decreasing)."""
+    if not len(row_block):
+        return np.zeros(0, int)
+    return np.flatnonzero(np.concatenate([[True], row_block[1:] != row_block[:-1]]))
+
+
+def block_moments(
+    J_global: FloatArray, J_block: FloatArray, f: FloatArray, row_block: IntArray
+) -> tuple[IntArray, FloatArray]:
+    """Every present block's ``Zᵀ Z`` with ``Z = [J_global | J_block | f]`` over its rows (P, n, n),
+    ``n = g + b + 1``, in one pass over the rows, and the blocks' first rows (``block_starts``):
+    ``J_globalᵀ J_global``, ``J_globalᵀ J_block``, ``J_blockᵀ J_block`` and ``Jᵀ f`` per block."""
+    starts = block_starts(row_block)
+    Z = np.concatenate([J_global, J_block, f[:, None]], axis=1)
+    n = Z.shape[1]
+    blocks = np.add.reduceat(Z[:, :, None] * Z[:, None, :], starts, axis=0) if len(starts) else np.zeros((0, n, n))
+    return starts, blocks
+
+
 class BlockNormal:
     """The normal equations of one Jacobian, scaled, ready for damped solves.
 
@@ -61,12 +81,8 @@ class BlockNormal:
         g, b = J_global.shape[1], J_block.shape[1]
         self.g, self.b, self.n_blocks = g, b, n_blocks
         self.J_global, self.J_block, self.row_block = J_global, J_block, row_block
-        starts = np.flatnonzero(np.r_[True, row_block[1:] != row_block[:-1]]) if len(row_block) else np.zeros(0, int)
+        starts, blocks = block_moments(J_global, J_block, f, row_block)
         present = row_block[starts]
-        # Every block's [J_global | J_block | f]ᵀ [J_global | J_block | f] in one pass over the rows.
-        Z = np.concatenate([J_global, J_block, f[:, None]], axis=1)
-        n = g + b + 1
-        blocks = np.add.reduceat(Z[:, :, None] * Z[:, None, :], starts, axis=0) if len(starts) else np.zeros((0, n, n))
         self._U = blocks[:, :g, :g].sum(axis=0)
         self._W = np.zeros((n_blocks, g, b))
         self._V = np.zeros((n_blocks, b, b))

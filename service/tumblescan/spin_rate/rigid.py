@@ -20,7 +20,7 @@ import numpy as np
 
 from .._typing import FloatArray, IntArray
 from ..geometry.rotations import cross3, tangent_basis
-from ..numerics.block_lm import block_lm
+from ..numerics.block_lm import block_lm, block_moments, block_starts
 from .rigid_model import RigidModel
 from .rotation import rot
 
@@ -51,7 +51,7 @@ class Observations:
     @cached_property
     def track_starts(self) -> IntArray:
         """The index of each track's first observation (``track`` is sorted)."""
-        return np.flatnonzero(np.concatenate([[True], self.track[1:] != self.track[:-1]]))
+        return block_starts(self.track)
 
     @cached_property
     def K_inv(self) -> FloatArray:
@@ -271,12 +271,10 @@ class TrackSchur:
     def build(JW_global: FloatArray, JW_line: FloatArray, rw: FloatArray, row_track: IntArray) -> TrackSchur:
         """``JW_global`` (R, n), ``JW_line`` (R, 4): the weighted Jacobian's blocks (each row's own
         track's line columns); ``rw`` (R,) weighted residuals (px); ``row_track`` (R,) sorted."""
-        starts = np.flatnonzero(np.concatenate([[True], row_track[1:] != row_track[:-1]]))
-        A = np.add.reduceat(JW_global[:, :, None] * JW_global[:, None, :], starts)
-        B = np.add.reduceat(JW_global[:, :, None] * JW_line[:, None, :], starts)
-        C = np.add.reduceat(JW_line[:, :, None] * JW_line[:, None, :], starts)
-        q_g = np.add.reduceat(JW_global * rw[:, None], starts)
-        q_l = np.add.reduceat(JW_line * rw[:, None], starts)
+        _, M = block_moments(JW_global, JW_line, rw, row_track)
+        g = JW_global.shape[1]
+        A, B, C = M[:, :g, :g], M[:, :g, g:-1], M[:, g:-1, g:-1]
+        q_g, q_l = M[:, :g, -1], M[:, g:-1, -1]
         BC = B @ np.linalg.pinv(C, rcond=1e-12, hermitian=True)  # (G, n, 4)
         S_parts = A - BC @ B.transpose(0, 2, 1)
         s_parts = q_g - (BC @ q_l[:, :, None])[:, :, 0]
