@@ -289,7 +289,7 @@ def best_of_starts(
     with its axis near the image plane is a finalist too. ``finalists_out``, when given, is
     filled with every converged finalist (the winner among them), for ``rate_rivals``."""
     # Independent fits run side by side (numerics.parallel); the order of every list is kept.
-    short = partial(_fit_from, obs, t_ref=t_ref, short=True)
+    short = partial(_short_fit_from, obs, t_ref=t_ref)
     plane_starts = plane_starts or []
     first = parallel_map(short, [*starts, *plane_starts])
     trials = first[: len(starts)]
@@ -323,7 +323,7 @@ def best_of_starts(
             if los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG and all(not _same_basin(f, g) for g in finalists):
                 near.append(f)
                 finalists.append(f)
-    done = parallel_map(partial(_fit_from, obs, t_ref=t_ref), [(f.omega_rad_s, f.axis, f.c0) for f in finalists])
+    done = parallel_map(partial(_refit, obs, t_ref=t_ref), finalists)
     if plane_starts:
         done = _distinct_minima(parallel_map(partial(_restarted, obs, t_ref=t_ref), _distinct_minima(done)))
         done = parallel_map(partial(_polished_if_near, obs, t_ref=t_ref), done)
@@ -341,10 +341,9 @@ def best_of_starts(
     return done[int(np.argmin(common_costs(done, radius, centre)))]
 
 
-def _fit_from(obs: Observations, start: Start, *, t_ref: float, short: bool = False) -> RigidFit:
-    """The fit from ``start`` (ω, axis, c0): converged, or ``_short_fit``."""
-    w0, a0, c0 = start
-    return _short_fit(obs, w0, a0, c0, t_ref) if short else fit_rigid(obs, w0, a0, c0, t_ref)
+def _short_fit_from(obs: Observations, start: Start, *, t_ref: float) -> RigidFit:
+    """``_short_fit`` from ``start`` (ω, axis, c0)."""
+    return _short_fit(obs, *start, t_ref)
 
 
 def _polished_if_near(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
@@ -358,6 +357,7 @@ def _short_fit(obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArr
 
 
 def _refit(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
+    """``fit`` carried to convergence on ``obs`` from its own rate, axis, centre and drift."""
     return fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
