@@ -17,13 +17,13 @@ from .meta import SpinInput
 from .options import EstimateOptions
 from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackObs
 from .rigid import Observations, RigidFit, fit_rigid
+from .rivals import peak_fits, rate_rivals, sigma_with_rivals
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
 from .search import (
     best_of_starts_without_strays,
     common_costs,
     los_start,
     plane_ladder_starts,
-    rate_rivals,
     scan_starts,
     with_drift_if_needed,
 )
@@ -41,7 +41,7 @@ RATE_SIGMA_FLOOR_REL = 0.0015
 IMG_RATE_MAX_FACTOR = 2.5
 REMATCH_ROUNDS = 3
 LOS_START_MAX_DEG = 30.0
-# Within this much of the image plane a rival rate the data do not rule out (search.rate_rivals) is
+# Within this much of the image plane a rival rate the data do not rule out (rivals.rate_rivals) is
 # reported, and σ widened to cover it: there the rate rests on short arcs of the edges along the
 # axis (the sense is not reported there either: SENSE_MIN_FROM_PLANE_DEG).
 RATE_RIVAL_PLANE_DEG = 15.0
@@ -154,13 +154,20 @@ def estimate_spin(
         )
     if not np.isfinite(fit.sigma_omega_rad_s) or not np.isfinite(fit.omega_rad_s):
         raise NotConvergedError("frames: the rigid fit did not converge (sigma not finite)", field="frames")
-    # 7. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
+    # 7. The image does not turn: the search may have ended in a slow basin while a cheaper one lies
+    # at the mask periodogram's peak; fits from the peaks on the final tracks, the cheapest wins.
+    if not sense_hint:
+        at_peaks = peak_fits(obs, fit, peaks, t[0], radius)
+        best = int(np.argmin(common_costs([fit, *at_peaks], radius, c0)))
+        finalists += [fit, *at_peaks]
+        fit = [fit, *at_peaks][best]
+    # 8. The weak-perspective twin: refit from (-a_x, -a_y, a_z); ambiguous when as good.
     twin = fit_rigid(obs, fit.omega_rad_s, mirror_twin(fit.axis), fit.c0, t[0], drift=fit.drift)
     s2 = max(fit.rms_px**2, 1e-6)
     if twin.cost < fit.cost:
         fit, twin = twin, fit
     ambiguous = 2 * (twin.cost - fit.cost) / s2 < TWIN_DELTA_CHI2
-    # 8. Near the image plane: rival rates the data do not rule out (reported, σ covers them). Also
+    # 9. Near the image plane: rival rates the data do not rule out (reported, σ covers them). Also
     # when the image does not turn whatever axis won: a collapsed fit's axis is often tilted 20-60°
     # toward the line of sight (benchmark plane_100_noisy), out of the 15° band.
     rivals: list[RigidFit] = []
@@ -341,16 +348,6 @@ def _result(
     tracks = _tracks_out(seq, obs, fit.residuals_px) if seq.meta.options.return_tracks else None
     return SpinResult(spin=spin, quality=quality, frames=_frames_info(seq, feats, obs, fit.residuals_px),
                       tracks=tracks, timings_ms=_timings(clock))  # fmt: skip
-
-
-def sigma_with_rivals(sigma: float, rate: float, rival_rates: list[float]) -> float:
-    """σ (deg/s) of a ``rate`` whose rivals (``rival_rates``, deg/s) the data do not rule out: at
-    least the spread of an equal mixture of the rate and its farthest rival, half their distance,
-    so that |error| <= 4σ holds whichever of the two is true; ``sigma`` without rivals."""
-    if not rival_rates:
-        return sigma
-    far = max(abs(r - rate) for r in rival_rates)
-    return float(np.hypot(sigma, 0.5 * far))
 
 
 def _cost_ratio(rival: RigidFit, fit: RigidFit) -> float:

@@ -59,16 +59,12 @@ MAX_LINE_DISTANCE_RADII = 2.0
 # convergence whatever its short-fit cost.
 PLANE_LADDER_RATIO = 1.5
 PLANE_FINALIST_MIN_LOS_DEG = 75.0
-# Near-plane finalists are refitted from axes tilted this much each way (``_axis_polished``).
+# Near-plane finalists are refitted from axes tilted this much each way (``axis_polished``).
 AXIS_POLISH_DEG = 1.5
 PLANE_FINALISTS = 2
 # A centre velocity (2 parameters) is kept when it lowers χ² by more than this: a slow drift of the
 # target across the image is otherwise absorbed by a wrong rate (measured: 1.7 and 6 % off).
 DRIFT_DELTA_CHI2 = 25.0
-# A fit at a rate over RATE_RIVAL_MIN_REL off the winner's whose cost is within this Δχ² (the
-# twin's test) is a rival the data do not rule out (``rate_rivals``).
-RATE_RIVAL_MIN_REL = 0.05
-RATE_RIVAL_DELTA_CHI2 = 9.0
 # Rounds of cutting piecewise-rigid tracks and comparing the starts again (near the image plane).
 SPLIT_ROUNDS = 3
 # After a cut the previous finalists are refitted to the cut tracks; the whole multi-start is run
@@ -312,7 +308,7 @@ def best_of_starts(
     for k in order:
         if len(finalists) == FINALISTS:
             break
-        if all(not _same_basin(trials[k], f) for f in finalists):
+        if all(not same_basin(trials[k], f) for f in finalists):
             finalists.append(trials[k])
     if plane_starts:  # the best distinct near-plane short fits are finalists too
         near = [f for f in finalists if los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG]
@@ -320,12 +316,12 @@ def best_of_starts(
             if len(near) >= PLANE_FINALISTS:
                 break
             f = trials[k]
-            if los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG and all(not _same_basin(f, g) for g in finalists):
+            if los_angle_deg(f.axis) >= PLANE_FINALIST_MIN_LOS_DEG and all(not same_basin(f, g) for g in finalists):
                 near.append(f)
                 finalists.append(f)
     done = parallel_map(partial(_refit, obs, t_ref=t_ref), finalists)
     if plane_starts:
-        done = _distinct_minima(parallel_map(partial(_restarted, obs, t_ref=t_ref), _distinct_minima(done)))
+        done = _distinct_minima(parallel_map(partial(restarted, obs, t_ref=t_ref), _distinct_minima(done)))
         done = parallel_map(partial(_polished_if_near, obs, t_ref=t_ref), done)
     best = done[int(np.argmin(common_costs(done, radius, centre)))]
     # The winner's weak-perspective twin, started from the converged rate: a short fit's twin was
@@ -347,8 +343,8 @@ def _short_fit_from(obs: Observations, start: Start, *, t_ref: float) -> RigidFi
 
 
 def _polished_if_near(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
-    """``_axis_polished`` for a fit with its axis near the image plane, else the fit."""
-    return _axis_polished(obs, fit, t_ref) if los_angle_deg(fit.axis) >= PLANE_FINALIST_MIN_LOS_DEG else fit
+    """``axis_polished`` for a fit with its axis near the image plane, else the fit."""
+    return axis_polished(obs, fit, t_ref) if los_angle_deg(fit.axis) >= PLANE_FINALIST_MIN_LOS_DEG else fit
 
 
 def _short_fit(obs: Observations, omega0: float, axis0: FloatArray, c0: FloatArray, t_ref: float) -> RigidFit:
@@ -361,7 +357,7 @@ def _refit(obs: Observations, fit: RigidFit, *, t_ref: float) -> RigidFit:
     return fit_rigid(obs, fit.omega_rad_s, fit.axis, fit.c0, t_ref, drift=fit.drift)
 
 
-def _restarted(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
+def restarted(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
     """``fit`` refitted from its own rate, axis and centre with the line structure initialised
     afresh, when that lowers the common-scale cost. Near the image plane the lines across the axis
     are a narrow pencil of planes whose structure, started from a rate and axis still far off, stays
@@ -372,7 +368,7 @@ def _restarted(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
     return again if cost[1] < cost[0] else fit
 
 
-def _axis_polished(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
+def axis_polished(obs: Observations, fit: RigidFit, t_ref: float) -> RigidFit:
     """The best (common-scale cost) of ``fit`` and fits started from its rate and centre with the
     axis tilted by ``AXIS_POLISH_DEG`` each way. Near the image plane each line's structure follows
     the axis, so a converged fit can stall 1° off the axis of a much cheaper minimum (plane_101_noisy:
@@ -437,36 +433,6 @@ def _refitted_lead(
     return refit, refit[int(np.argmin(common_costs(refit, radius, centre)))]
 
 
-def rate_rivals(
-    obs: Observations, fit: RigidFit, finalists: list[RigidFit], t_ref: float, centre: FloatArray, radius: float
-) -> list[RigidFit]:
-    """The fits of ``obs`` at a rate distinct from ``fit``'s that explain the data almost as well:
-    each of ``finalists`` (the search's converged fits, of possibly other observations) whose rate
-    differs from ``fit``'s by over ``RATE_RIVAL_MIN_REL`` is refitted to ``obs`` from its own rate,
-    axis and centre, and is a rival when it stays that far off and its common-scale Cauchy cost is
-    within ``Δχ² = 2·Δcost/σ² < RATE_RIVAL_DELTA_CHI2`` of ``fit``'s (σ = ``fit``'s rms, as for the
-    weak-perspective twin) and it is plausible (``common_costs``). Farthest rate first.
-
-    With the axis near the image plane the rate is held by short arcs of the edges along the axis,
-    and a fit can end in a basin whose rate is far off while a rival basin fits nearly as well
-    (benchmark: 6 of 38 runs at 72-98 % off with a σ of 0.1-0.3 deg/s); one fit's σ, a curvature
-    at its own minimum, cannot say so."""
-    s2 = max(fit.rms_px**2, 1e-6)
-    rivals: list[RigidFit] = []
-    for f in finalists:
-        if abs(f.omega_rad_s - fit.omega_rad_s) <= RATE_RIVAL_MIN_REL * fit.omega_rad_s:
-            continue
-        if any(_same_basin(f, r) for r in rivals):
-            continue
-        again = fit_rigid(obs, f.omega_rad_s, f.axis, f.c0, t_ref, drift=fit.drift)
-        if abs(again.omega_rad_s - fit.omega_rad_s) <= RATE_RIVAL_MIN_REL * fit.omega_rad_s:
-            continue
-        cost = common_costs([fit, again], radius, centre)
-        if np.isfinite(cost[1]) and 2.0 * (cost[1] - cost[0]) / s2 < RATE_RIVAL_DELTA_CHI2:
-            rivals.append(again)
-    return sorted(rivals, key=lambda r: -abs(r.omega_rad_s - fit.omega_rad_s))
-
-
 def _distinct_minima(fits: list[RigidFit]) -> list[RigidFit]:
     """``fits`` without those that sit at the minimum of an earlier one (``SAME_MINIMUM_REL`` in
     rate and cost, ``SAME_MINIMUM_AXIS_DEG`` in axis): refitting or polishing such a copy only
@@ -484,7 +450,7 @@ def _distinct_minima(fits: list[RigidFit]) -> list[RigidFit]:
     return out
 
 
-def _same_basin(a: RigidFit, b: RigidFit) -> bool:
+def same_basin(a: RigidFit, b: RigidFit) -> bool:
     """Whether two fits sit in one basin (``_near``)."""
     return _near(a.omega_rad_s, a.axis, b.omega_rad_s, b.axis)
 
