@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
@@ -22,6 +23,23 @@ def tracks_for(seed: int, *, noise: bool = True, **scene_kw: object) -> tuple[Mo
     motion = motion_for(seed)
     tracks, _ = simulate_tracks(motion, Scene(noise=noise, **scene_kw), seed=seed)
     return motion, tracks
+
+
+@pytest.fixture(autouse=True)
+def _thread_pool_variables() -> Iterator[None]:
+    """Each test leaves the BLAS/OpenMP sizes in ``os.environ`` as it found them: ``serve`` and
+    ``worker`` run in-process size them for their workers (``cli.service.share_cores``), and a
+    later test would inherit that (``numerics.parallel`` reads ``OMP_NUM_THREADS``: a leaked 2 let a
+    job's queue worker try a process pool, which a daemonic process may not start)."""
+    from tumblescan.cli.service import THREAD_POOL_VARS
+
+    saved = {var: os.environ.get(var) for var in THREAD_POOL_VARS}
+    yield
+    for var, value in saved.items():
+        if value is None:
+            os.environ.pop(var, None)
+        else:
+            os.environ[var] = value
 
 
 @pytest.fixture(scope="session")
