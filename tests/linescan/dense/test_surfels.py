@@ -266,10 +266,10 @@ def test_anchors_of_a_curved_surface_lie_on_it_at_every_incidence(monkeypatch: p
 
 
 def _grazing_wall_behind_a_plate(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A wall at 82 deg incidence (cells of one face 2 m apart in range, beyond the range step)
-    and, in front of its left part, a plate facing the sensor at 30 m: points, line times,
-    whether each is on the plate, and the wall's unit normal."""
-    xyz, tau, n = _wall(82.0, seed)
+    """A wall at 79 deg incidence (76-82 deg across the view: cells of one face 1.2-2.1 m apart
+    in range, beyond the range step) and, in front of its left part, a plate facing the sensor at
+    30 m: points, line times, whether each is on the plate, and the wall's unit normal."""
+    xyz, tau, n = _wall(79.0, seed)
     direction = xyz / np.linalg.norm(xyz, axis=1, keepdims=True)
     plate = np.arctan2(direction[:, 0], direction[:, 2]) < np.radians(-1.0)
     xyz[plate] = NOISE.sample(direction[plate] * (30.0 / direction[plate, 2:3]), np.random.default_rng(seed + 1))

@@ -400,8 +400,12 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     spread = count * np.maximum(w[:, 1], 0.0)
     tilt_var = _tilt_variance(var, spread)
     if PLANE_INTERIOR_SIGMAS is not None:
+        # Not beyond MIN_COS_INCIDENCE: there the noise's covariance (hence the normal) is clamped.
+        sight = anchor_obs / np.linalg.norm(anchor_obs, axis=1, keepdims=True)
+        seen = np.abs(np.einsum("ni,ni->n", sight, normal_obs)) >= MIN_COS_INCIDENCE
+        candidate = flat & ~data.interior & seen
         on_plane = _interior_on_plane(
-            data.neighbours, mean, normal_ref, var, tilt_var, count, flat & ~data.interior, PLANE_INTERIOR_SIGMAS
+            data.neighbours, mean, normal_ref, var, tilt_var, count, candidate, PLANE_INTERIOR_SIGMAS
         )
         data = replace(data, interior=data.interior | on_plane)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
