@@ -335,12 +335,12 @@ def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> li
     return [shares, *bounds]
 
 
-def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: list[str]) -> list[list[object]]:
-    """The interior test's range step (``surfels.MAX_RANGE_STEP``, in cells) at other values, with
-    (suffix ``p``) or without the test of the neighbours on the cell's plane
-    (``surfels.PLANE_INTERIOR_SIGMAS``): the share of hits in planar surfels at the true motion,
-    their bound over the bound of all hits, and the share of them not on their surfel's main face
-    (the bias the test is there to stop)."""
+def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: list[float]) -> list[list[object]]:
+    """The interior test's range step (``surfels.MAX_RANGE_STEP``, in cells) at other values: the
+    share of hits in planar surfels at the true motion, their bound over the bound of all hits,
+    and the share of them not on their surfel's main face (the bias the test is there to stop).
+    (The branch ``wip-ls-line``'s commit 2abf78b adds ``4p``: the step and a test of the
+    neighbours on the cell's plane; docs/linescan.md.)"""
     from tumblescan.linescan.dense import surfels
 
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
@@ -353,11 +353,10 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     faces = face_of_hits(scene, motion, sim.reference_m)
     b_all = dense_bound(motion, scene, sim, T, faces=faces)
     rows: list[list[object]] = []
-    default = surfels.MAX_RANGE_STEP, surfels.PLANE_INTERIOR_SIGMAS
+    default = surfels.MAX_RANGE_STEP
     try:
         for step in steps:
-            surfels.MAX_RANGE_STEP = float(step.rstrip("p"))
-            surfels.PLANE_INTERIOR_SIGMAS = default[1] if step.endswith("p") else None
+            surfels.MAX_RANGE_STEP = step
             data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
                            range_sigma_m=noise.range_sigma_m)  # fmt: skip
             mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
@@ -373,10 +372,10 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
             np.maximum.at(majority, pairs[0], cnt)
             other = 1.0 - majority.sum() / max(sel.sum(), 1)
             b = dense_bound(motion, scene, sim, T, hits=used, faces=faces)
-            rows.append([name, seed, step, f"{100 * used.mean():.1f}", f"{100 * other:.2f}",
+            rows.append([name, seed, f"{step:g}", f"{100 * used.mean():.1f}", f"{100 * other:.2f}",
                          *[f"{b[p] / b_all[p]:.2f}" for p in PARAMS]])  # fmt: skip
     finally:
-        surfels.MAX_RANGE_STEP, surfels.PLANE_INTERIOR_SIGMAS = default
+        surfels.MAX_RANGE_STEP = default
     return rows
 
 
@@ -391,9 +390,8 @@ def main() -> None:
     parser.add_argument("--distances", nargs="+", type=float, default=[50.0])
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--ratio", type=float, default=8.0, help="l2 / l1 above which a cell is a line")
-    parser.add_argument("--range-steps", nargs="+", default=None,
-                        help="instead: the interior test's range step at these values (cells; 4p: 4 and the "
-                             "plane test)")  # fmt: skip
+    parser.add_argument("--range-steps", nargs="+", type=float, default=None,
+                        help="instead: the interior test's range step at these values (cells)")  # fmt: skip
     args = parser.parse_args()
     if args.range_steps:
         rows = []

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tumblescan.linescan.dense import surfels as surfels_module
-from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS, SIDE_NEIGHBOURS
+from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
 from tumblescan.linescan.dense.surfels import (
     SPURIOUS_MIN_SHARE,
     DenseData,
@@ -263,45 +263,3 @@ def test_anchors_of_a_curved_surface_lie_on_it_at_every_incidence(monkeypatch: p
     monkeypatch.setattr(surfels_module, "CURVATURE_CORRECTION", False)
     centroids = _radial_offset_m(build_surfels(data, mapping, NOISE).anchor_obs)
     assert np.mean(centroids[grazing]) < -1.5e-3 and np.mean(centroids[grazing]) < 2 * np.mean(centroids[head_on])
-
-
-def _grazing_wall_behind_a_plate(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A wall at 79 deg incidence (76-82 deg across the view: cells of one face 1.2-2.1 m apart
-    in range, beyond the range step) and, in front of its left part, a plate facing the sensor at
-    30 m: points, line times, whether each is on the plate, and the wall's unit normal."""
-    xyz, tau, n = _wall(79.0, seed)
-    direction = xyz / np.linalg.norm(xyz, axis=1, keepdims=True)
-    plate = np.arctan2(direction[:, 0], direction[:, 2]) < np.radians(-1.0)
-    xyz[plate] = NOISE.sample(direction[plate] * (30.0 / direction[plate, 2:3]), np.random.default_rng(seed + 1))
-    return xyz, tau, plate, n
-
-
-def test_a_wall_at_grazing_incidence_is_used_and_an_occlusion_border_is_not(monkeypatch: pytest.MonkeyPatch) -> None:
-    xyz, tau, plate, n_true = _grazing_wall_behind_a_plate(seed=6)
-    data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m)
-    mapping = LineMapping(np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0]), data.tau_s, tuple(range(9)))
-    on_plate = np.bincount(data.cell, plate, minlength=len(data.cell_frame)) > 0
-    on_wall = np.bincount(data.cell, ~plate, minlength=len(data.cell_frame)) > 0
-    nb = data.neighbours
-    beside_plate = np.any((nb >= 0) & on_plate[np.maximum(nb, 0)], axis=1)
-    side = nb[:, list(SIDE_NEIGHBOURS)]
-    side_plate = np.any((side >= 0) & on_plate[np.maximum(side, 0)], axis=1)
-    side_wall = np.any((side >= 0) & on_wall[np.maximum(side, 0)], axis=1)
-    wall_inside = on_wall & ~on_plate & ~beside_plate & np.all(data.neighbours >= 0, axis=1)
-    with_test = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "PLANE_INTERIOR_SIGMAS", None)
-    without = build_surfels(data, mapping, NOISE)
-    # Without the plane test the wall's cells, 2 m apart in range, pass for an occlusion border.
-    assert np.count_nonzero(without.planar & wall_inside) < 0.1 * np.count_nonzero(wall_inside)
-    assert np.count_nonzero(with_test.planar & wall_inside) > 0.8 * np.count_nonzero(wall_inside)
-    # No cell holding points of both is used, and the test adds none beside the other surface
-    # in the view (a plate cell beside a cell mostly of plate points passes the range step).
-    border = (on_wall & side_plate) | (on_plate & side_wall)
-    assert np.count_nonzero(border) >= 30
-    assert not np.any(with_test.planar & on_wall & on_plate)
-    assert not np.any(with_test.planar & ~without.planar & border)
-    # The grazing wall's anchors lie on it: within a few mm, and no bias.
-    used = with_test.planar & wall_inside
-    offset = (with_test.anchor_obs[used] - np.array([0.0, 0.0, 50.0])) @ n_true
-    assert np.sqrt(np.mean(offset**2)) < 0.005
-    assert abs(float(np.mean(offset))) < 3 * np.std(offset) / np.sqrt(len(offset))

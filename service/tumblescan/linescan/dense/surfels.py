@@ -41,10 +41,6 @@ MIN_COS_INCIDENCE = 0.15
 NOISE_COV_PASSES = 2
 SHARED_MAX_ANGLE = np.radians(30.0)
 CURVATURE_CORRECTION = True  # anchors on the surface, not at the centroids (curvature.py)
-# A flat cell whose side neighbours were all hit is interior when their ranges differ from its by
-# more than MAX_RANGE_STEP cells yet their centroids lie on its plane within this many sigmas (a
-# face at grazing incidence, not an occlusion border); see _interior_on_plane.
-PLANE_INTERIOR_SIGMAS: float | None = 3.0
 
 
 @dataclass(frozen=True)
@@ -165,37 +161,6 @@ def _interior(neighbours: IntArray, rho_m: FloatArray, *, max_step_m: float) -> 
     side = neighbours[:, list(SIDE_NEIGHBOURS)]
     near = np.abs(rho_m[np.maximum(side, 0)] - rho_m[:, None]) <= max_step_m
     return np.asarray(np.all((side >= 0) & near, axis=1))
-
-
-def _interior_on_plane(
-    neighbours: IntArray,
-    mean: FloatArray,
-    normal_ref: FloatArray,
-    var_m2: FloatArray,
-    tilt_var_rad2: FloatArray,
-    count: FloatArray,
-    candidate: NDArray[np.bool_],
-    sigmas: float,
-) -> NDArray[np.bool_]:
-    """The ``candidate`` cells (flat, not interior) whose 4 side neighbours were hit and whose
-    neighbours' centroids (``mean`` at ``T``) lie on their plane:
-
-        |n . (c_j - c)| <= sigmas sqrt(v / N + v / N_j + t |c_j - c|_perp^2)
-
-    (``v`` a point's noise along the normal ``n``, ``t`` its tilt variance). At grazing
-    incidence neighbouring cells of one face lie many cells apart in range (a cell's width over
-    the cosine of the incidence), which the range step of :func:`_interior` takes for an
-    occlusion; a surface behind an occlusion border does not lie on the cell's plane."""
-    side = neighbours[:, list(SIDE_NEIGHBOURS)]
-    ok = candidate & np.all(side >= 0, axis=1)
-    for k in range(side.shape[1]):
-        j = np.maximum(side[:, k], 0)
-        d = mean[j] - mean
-        z = np.einsum("ni,ni->n", normal_ref, d)
-        perp2 = np.einsum("ni,ni->n", d, d) - z**2
-        sigma2 = var_m2 / np.maximum(count, 1) + var_m2 / np.maximum(count[j], 1) + tilt_var_rad2 * perp2
-        ok &= z**2 <= sigmas**2 * sigma2
-    return np.asarray(ok)
 
 
 class LineMapping:
@@ -399,15 +364,6 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     flat = flat_cells(w, var, count)
     spread = count * np.maximum(w[:, 1], 0.0)
     tilt_var = _tilt_variance(var, spread)
-    if PLANE_INTERIOR_SIGMAS is not None:
-        # Not beyond MIN_COS_INCIDENCE: there the noise's covariance (hence the normal) is clamped.
-        sight = anchor_obs / np.linalg.norm(anchor_obs, axis=1, keepdims=True)
-        seen = np.abs(np.einsum("ni,ni->n", sight, normal_obs)) >= MIN_COS_INCIDENCE
-        candidate = flat & ~data.interior & seen
-        on_plane = _interior_on_plane(
-            data.neighbours, mean, normal_ref, var, tilt_var, count, candidate, PLANE_INTERIOR_SIGMAS
-        )
-        data = replace(data, interior=data.interior | on_plane)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
     planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
