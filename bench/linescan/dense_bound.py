@@ -190,11 +190,15 @@ def dense_bound(
     *,
     hits: NDArray[np.bool_] | None = None,
     faces: tuple[IntArray, FloatArray] | None = None,
+    extra_information: FloatArray | None = None,
 ) -> dict[str, float]:
     """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units.
 
     faces: each hit's face and the faces' sensor-frame normals; by default the mesh's
-    coplanar triangles (:func:`face_of_hits`).
+    coplanar triangles (:func:`face_of_hits`). extra_information: ``(9, 9)`` Fisher information
+    on the motion (at ``T``, parameter order of :meth:`Motion.params`, its own nuisances already
+    eliminated) of other hits, added before the inversion (``bench/linescan/line_potential.py``'s
+    beams modelled as lines).
     """
     truth = motion.at_reference(reference_time_s)
     x = truth.params()
@@ -248,7 +252,8 @@ def dense_bound(
     # information there, and none lost on the motion: the line moves rigidly).
     absorbed = np.einsum("fij,fjk,flk->il", F_mf[used], np.linalg.pinv(F_ff[used], rcond=1e-10, hermitian=True),
                          F_mf[used])  # fmt: skip
-    cov = np.asarray(np.linalg.inv(F_mm - absorbed), dtype=np.float64)
+    extra = np.zeros((9, 9)) if extra_information is None else extra_information
+    cov = np.asarray(np.linalg.inv(F_mm - absorbed + extra), dtype=np.float64)
     return {
         **{f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(x, cov).items()},
         "center_m": float(np.sqrt(np.trace(cov[6:9, 6:9]))),
