@@ -21,6 +21,7 @@ from .tracking import (
     predict_affine,
     retry_grid,
     suspect_turns,
+    untrusted_pairs,
 )
 
 
@@ -53,19 +54,35 @@ def extract(
     progress("lines", 0.4)
     steps = list(itertools.pairwise(found))
     predicted = parallel_map(_affine_of, [(grays[k], grays[l_], targets[k], targets[l_]) for k, l_ in steps])
-    predicted = _consistent(
-        grays, targets, steps, predicted, np.arange(len(grays), dtype=float) if t_s is None else t_s
-    )
+    times = np.arange(len(grays), dtype=float) if t_s is None else t_s
+    predicted = _consistent(grays, targets, steps, predicted, times)
+    untrusted = _untrusted(steps, predicted, times)
     progress("tracking", 0.5)
     pairs: dict[tuple[int, int], list[tuple[int, int]]] = {}
     rotation: dict[tuple[int, int], float] = {}
     affines: dict[tuple[int, int], FloatArray] = {}
-    for (k, l_), pred in zip(steps, predicted, strict=True):
-        pairs[(k, l_)] = match(segments[k].ends_px, segments[l_].ends_px, pred.affine)
+    for (k, l_), pred, off in zip(steps, predicted, untrusted, strict=True):
+        pairs[(k, l_)] = [] if off else match(segments[k].ends_px, segments[l_].ends_px, pred.affine)
         affines[(k, l_)] = pred.affine
         rotation[(k, l_)] = pred.turn_deg
     progress("tracking", 0.6)
     return Features(targets, segments, build_tracks(segments, pairs), rotation, affines)
+
+
+def _turns(
+    steps: list[tuple[int, int]], predicted: list[Prediction], t_s: FloatArray
+) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """Each pair's turn (deg), interval (s) and whether its ECC converged."""
+    turns = np.array([p.turn_deg for p in predicted])
+    dt = np.array([t_s[l_] - t_s[k] for k, l_ in steps], dtype=float)
+    return turns, dt, np.isfinite([p.ecc_rho for p in predicted])
+
+
+def _untrusted(steps: list[tuple[int, int]], predicted: list[Prediction], t_s: FloatArray) -> np.ndarray:
+    """(P,) bool: the pairs not to match across (``tracking.untrusted_pairs``)."""
+    if not steps:
+        return np.zeros(0, dtype=bool)
+    return untrusted_pairs(*_turns(steps, predicted, t_s))
 
 
 def _segments_of(frame: tuple[FloatArray, np.ndarray, TargetMask]) -> Segments:
@@ -89,9 +106,8 @@ def _consistent(
     rate's, or its ECC not converged) predicted again about the expected turn, the better kept."""
     if not steps:
         return predicted
-    turns = np.array([p.turn_deg for p in predicted])
-    dt = np.array([t_s[l_] - t_s[k] for k, l_ in steps])
-    expected = suspect_turns(turns, dt, np.isfinite([p.ecc_rho for p in predicted]))
+    turns, dt, converged = _turns(steps, predicted, t_s)
+    expected = suspect_turns(turns, dt, converged)
     redo = np.flatnonzero(np.isfinite(expected))
     retried = parallel_map(
         _retry_of,

@@ -10,7 +10,8 @@ four pairs predicted 55-71° off, tracks shifted round the bus's four parallel e
 off; ``los_109_clean``: two pairs 34° and 84° off, the two longest tracks joined across one, 6.7 %
 off). A spin turns the image at a rate that changes slowly, so a pair whose turn is far from the
 median rate's (or whose ECC did not converge) is predicted again from a grid about the expected
-turn, and the prediction whose ECC correlation is higher is kept (``consistent_affines``)."""
+turn, and the prediction whose ECC correlation is higher is kept (``suspect_turns``,
+``better_prediction``); a pair still far off it is not matched across (``untrusted_pairs``)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,9 @@ ANGLE_GRID_DEG = np.arange(-60.0, 60.01, 2.0)
 # from a grid of ±RETRY_HALF_WIDTH_DEG about that expected turn (aliases seen: 34-90° off; the right
 # pairs of a benchmark sequence lie within 6° of it, a dropped frame's included).
 SUSPECT_TURN_DEG = 12.0
+# The image turns (the expected turn means something) above this median turn a frame, as the sense
+# hint of the estimate (estimate.py: 3° a median interval).
+TURNING_MIN_DEG = 3.0
 RETRY_HALF_WIDTH_DEG = 10.0
 MAX_ANGLE_DEG = 8.0
 MAX_OFFSET_PX = 5.0
@@ -119,12 +123,9 @@ def predict_affine(
     return Prediction(np.column_stack([A, A @ -o + b + o]), best_angle, float(rho))
 
 
-def suspect_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> FloatArray:
-    """For each frame pair, its expected turn (deg) when the pair is suspect, else NaN.
-
-    A spin turns the image at a rate that changes slowly; the expected turn of a pair is the median
-    rate of the converged pairs times its interval (a dropped frame turns twice as far). A pair is
-    suspect when its ECC did not converge or its turn is over ``SUSPECT_TURN_DEG`` from that.
+def expected_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> FloatArray | None:
+    """Each frame pair's expected turn (deg): the median turn rate of the pairs whose ECC converged
+    times the pair's interval (a dropped frame turns twice as far); None under 3 such pairs.
 
     Parameters
     ----------
@@ -133,13 +134,39 @@ def suspect_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray
     """
     turns_deg = np.asarray(turns_deg, dtype=float)
     dt_s = np.asarray(dt_s, dtype=float)
-    out = np.full(len(turns_deg), np.nan)
     if int(np.sum(converged)) < 3:
+        return None
+    return np.asarray(float(np.median(turns_deg[converged] / dt_s[converged])) * dt_s, dtype=float)
+
+
+def suspect_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> FloatArray:
+    """For each frame pair (as ``expected_turns``), its expected turn (deg) when the pair is suspect,
+    else NaN: a pair is suspect when its ECC did not converge or its turn is over
+    ``SUSPECT_TURN_DEG`` from the expected one."""
+    out = np.full(len(turns_deg), np.nan)
+    expected = expected_turns(turns_deg, dt_s, converged)
+    if expected is None:
         return out
-    expected = float(np.median(turns_deg[converged] / dt_s[converged])) * dt_s
-    bad = ~converged | (np.abs(turns_deg - expected) > SUSPECT_TURN_DEG)
+    bad = ~np.asarray(converged, dtype=bool) | (np.abs(np.asarray(turns_deg) - expected) > SUSPECT_TURN_DEG)
     out[bad] = expected[bad]
     return out
+
+
+def untrusted_pairs(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> np.ndarray:
+    """(P,) bool: the frame pairs (as ``expected_turns``) whose turn is still over
+    ``SUSPECT_TURN_DEG`` from the expected one (after the retry), when the image turns (the median
+    turn over ``TURNING_MIN_DEG`` a frame). No segment is matched across them: a match through a
+    wrong prediction joins two edges into one track, while a gap is bridged later by the rigid
+    model's re-matching (benchmark ``oblique_116``: with a pair 38° off its expected turn matched,
+    the fit ended 35 % off, or too few tracks were left; without, 0.06-0.11 %). When the image does
+    not turn (the axis near the image plane) a turn has no expected value and every pair is kept."""
+    keep_all = np.zeros(len(turns_deg), dtype=bool)
+    expected = expected_turns(turns_deg, dt_s, converged)
+    if expected is None:
+        return keep_all
+    if float(np.median(np.abs(expected))) <= TURNING_MIN_DEG:
+        return keep_all
+    return np.asarray(np.abs(np.asarray(turns_deg) - expected) > SUSPECT_TURN_DEG, dtype=bool)
 
 
 def retry_grid(expected_turn_deg: float) -> FloatArray:
