@@ -74,10 +74,16 @@ def true_motion(seed: int, kind: str) -> TrueMotion:
         def __init__(self, h: int, w: int) -> None:
             self.radiance = np.zeros((h, w))
 
+    def blank(mesh: Any, cam: Any, poses: Any, sun: Any) -> _Blank:
+        return _Blank(cam.height_px, cam.width_px)
+
+    def dark(radiance: Any, sensor: Any, rng: Any) -> np.ndarray:
+        return np.zeros(radiance.shape, np.uint8)
+
     try:
         simulate._truth = grab  # type: ignore[assignment]
-        simulate.render_exposure = lambda mesh, cam, poses, sun: _Blank(cam.height_px, cam.width_px)  # type: ignore[assignment]
-        simulate.expose = lambda radiance, sensor, rng: np.zeros(radiance.shape, np.uint8)  # type: ignore[assignment]
+        simulate.render_exposure = blank  # type: ignore[assignment]
+        simulate.expose = dark
         simulate.simulate_sequence(seed, kind)  # type: ignore[arg-type]
     finally:
         simulate._truth, simulate.render_exposure, simulate.expose = real_truth, real_render, real_expose
@@ -225,8 +231,8 @@ def final(seq: Any, motion: TrueMotion) -> None:
         f"estimate {res.spin.rate_deg_s:.4f} deg/s (truth {np.degrees(motion.omega_rad_s):.4f}), "
         f"rms {res.quality.fit_rms_px}"
     )
-    for name, f in (("from truth", truth_fit), ("from winner", win)):
-        print(f"{name}: {np.degrees(f.omega_rad_s):.4f} deg/s, cost {f.cost:.4g}, rms {f.rms_px:.3f} px")
+    for name, fit in (("from truth", truth_fit), ("from winner", win)):
+        print(f"{name}: {np.degrees(fit.omega_rad_s):.4f} deg/s, cost {fit.cost:.4g}, rms {fit.rms_px:.3f} px")
 
 
 if __name__ == "__main__":

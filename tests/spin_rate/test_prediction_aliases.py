@@ -1,6 +1,7 @@
 """Frame-to-frame predictions against the simulator's truth: a grid alias (the image turned by +θ
 read as -θ, or a square face read 90° off) is predicted again about the turn the other pairs agree
-on (``tracking.suspect_turns``), so every pair maps the visible corners near their true places."""
+on (``tracking.suspect_turns``), so every pair maps the visible corners near their true places; a
+pair still far off that turn is not matched across (``tracking.untrusted_pairs``)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 from tumblescan.spin_rate.features import extract
 from tumblescan.spin_rate.pipeline import load_input
 from tumblescan.spin_rate.simulate import simulate_sequence, write_sequence
-from tumblescan.spin_rate.tracking import Prediction, better_prediction, suspect_turns
+from tumblescan.spin_rate.tracking import Prediction, better_prediction, suspect_turns, untrusted_pairs
 
 
 def _corner_errors_px(d: Path) -> tuple[list[float], list[float]]:
@@ -42,9 +43,7 @@ def _corner_errors_px(d: Path) -> tuple[list[float], list[float]]:
         ("oblique", 110, True, 512),
     ],
 )
-def test_every_pair_predicts_the_true_corners(
-    tmp_path: Path, kind: str, seed: int, noise: bool, width_px: int
-) -> None:
+def test_every_pair_predicts_the_true_corners(tmp_path: Path, kind: str, seed: int, noise: bool, width_px: int) -> None:
     d = tmp_path / "seq"
     write_sequence(d, simulate_sequence(seed, kind, noises=(noise,), width_px=width_px))  # type: ignore[arg-type]
     errs, best = _corner_errors_px(d)
@@ -72,3 +71,13 @@ def test_the_retry_is_kept_only_when_its_ecc_correlation_is_higher() -> None:
     assert better_prediction(first, Prediction(A, -16.0, float("nan"))).grid_angle_deg == 10.0
     failed = Prediction(A, 10.0, float("nan"))
     assert better_prediction(failed, Prediction(A, -16.0, 0.9)).grid_angle_deg == -16.0
+
+
+def test_a_pair_still_off_the_turn_is_not_matched_across_when_the_image_turns() -> None:
+    dt = np.ones(6)
+    converged = np.ones(6, dtype=bool)
+    turning = np.array([-11.0, -13.0, -19.0, 54.0, -12.0, -9.0])
+    assert untrusted_pairs(turning, dt, converged).tolist() == [False, False, False, True, False, False]
+    # The image does not turn (the axis near the image plane): a turn has no expected value.
+    still = np.array([0.5, -1.0, 25.0, 0.2, -0.4, 1.0])
+    assert not untrusted_pairs(still, dt, converged).any()
