@@ -1,7 +1,7 @@
 """Frame-to-frame predictions against the simulator's truth: a grid alias (the image turned by +θ
 read as -θ, or a square face read 90° off) is predicted again about the turn the other pairs agree
 on (``tracking.suspect_turns``), so every pair maps the visible corners near their true places; a
-pair still far off that turn is not matched across (``tracking.untrusted_pairs``)."""
+pair still turned the other way is not matched across (``tracking.untrusted_pairs``)."""
 
 from __future__ import annotations
 
@@ -74,10 +74,11 @@ def test_the_retry_is_kept_only_when_its_ecc_correlation_is_higher() -> None:
     assert better_prediction(failed, Prediction(A, -16.0, 0.9)).grid_angle_deg == -16.0
 
 
-def test_a_pair_still_off_the_turn_is_not_matched_across_when_the_image_turns() -> None:
+def test_a_pair_turned_the_other_way_is_not_matched_across_when_the_image_turns() -> None:
     dt = np.ones(6)
     converged = np.ones(6, dtype=bool)
-    turning = np.array([-11.0, -13.0, -19.0, 54.0, -12.0, -9.0])
+    # The third pair turns the same way, unevenly far (kept); the fourth the other way (not kept).
+    turning = np.array([-11.0, -13.0, -30.0, 54.0, -12.0, -9.0])
     assert untrusted_pairs(turning, dt, converged).tolist() == [False, False, False, True, False, False]
     # The image does not turn (the axis near the image plane): a turn has no expected value.
     still = np.array([0.5, -1.0, 25.0, 0.2, -0.4, 1.0])

@@ -153,20 +153,24 @@ def suspect_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray
 
 
 def untrusted_pairs(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> np.ndarray:
-    """(P,) bool: the frame pairs (as ``expected_turns``) whose turn is still over
-    ``SUSPECT_TURN_DEG`` from the expected one (after the retry), when the image turns (the median
-    turn over ``TURNING_MIN_DEG`` a frame). No segment is matched across them: a match through a
-    wrong prediction joins two edges into one track, while a gap is bridged later by the rigid
-    model's re-matching (benchmark ``oblique_116``: with a pair 38° off its expected turn matched,
-    the fit ended 35 % off, or too few tracks were left; without, 0.06-0.11 %). When the image does
-    not turn (the axis near the image plane) a turn has no expected value and every pair is kept."""
+    """(P,) bool: the frame pairs (as ``expected_turns``) that still turn the image the other way
+    from the expected turn, by over ``SUSPECT_TURN_DEG``, after the retry, when the image turns (the
+    median expected turn over ``TURNING_MIN_DEG`` a frame). A spin seen off the image plane turns
+    the image one way (its sense), though unevenly (a pair at -22° where -4° is expected can be
+    right: benchmark ``plane_116_clean``, which then kept too few tracks); a pair turned the other
+    way is not the spin. No segment is matched across such a pair: a match through a wrong
+    prediction joins two edges into one track, while a gap is bridged later by the rigid model's
+    re-matching (benchmark ``oblique_116``: with pairs turned +12..+54° against -10° expected
+    matched, the fit ended 35 % off, or too few tracks were left; without, 0.06-0.11 %). When the
+    image does not turn (the axis near the image plane) every pair is kept."""
     keep_all = np.zeros(len(turns_deg), dtype=bool)
     expected = expected_turns(turns_deg, dt_s, converged)
     if expected is None:
         return keep_all
     if float(np.median(np.abs(expected))) <= TURNING_MIN_DEG:
         return keep_all
-    return np.asarray(np.abs(np.asarray(turns_deg) - expected) > SUSPECT_TURN_DEG, dtype=bool)
+    turns = np.asarray(turns_deg, dtype=float)
+    return np.asarray((np.abs(turns - expected) > SUSPECT_TURN_DEG) & (turns * expected < 0), dtype=bool)
 
 
 def retry_grid(expected_turn_deg: float) -> FloatArray:
