@@ -11,7 +11,7 @@ off; ``los_109_clean``: two pairs 34° and 84° off, the two longest tracks join
 off). A spin turns the image at a rate that changes slowly, so a pair whose turn is far from the
 median rate's (or whose ECC did not converge) is predicted again from a grid about the expected
 turn, and the prediction whose ECC correlation is higher is kept (``suspect_turns``,
-``better_prediction``); a pair still far off it is not matched across (``untrusted_pairs``)."""
+``better_prediction``); a pair that still turns the image the other way is not matched across (``untrusted_pairs``)."""
 
 from __future__ import annotations
 
