@@ -80,7 +80,7 @@ def estimate_spin(
         flags.append("alias_unchecked")
         max_rate = DEFAULT_MAX_STEP_DEG / dt_med
     # 2-3. Target masks, LSD segments, line tracks.
-    feats = extract(seq.grays, seq.full_scale, meta.prior.target_polarity, progress)
+    feats = extract(seq.grays, seq.full_scale, meta.prior.target_polarity, progress, t)
     clock["features"] = time.perf_counter()
     tracks = [tr for tr in feats.tracks if len(tr) >= MIN_TRACK_FRAMES]
     if len(tracks) < 2:

@@ -12,7 +12,17 @@ from ..numerics.parallel import parallel_map
 from .errors import NoTargetError
 from .segments import Segments, frame_segments
 from .target import TargetMask, find_target, to_gray8
-from .tracking import Track, build_tracks, match, predict_affine
+from .tracking import (
+    Prediction,
+    Track,
+    better_prediction,
+    build_tracks,
+    match,
+    predict_affine,
+    retry_grid,
+    suspect_turns,
+    untrusted_pairs,
+)
 
 
 @dataclass
@@ -24,9 +34,11 @@ class Features:
     affines: dict[tuple[int, int], FloatArray]
 
 
-def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress: Progress) -> Features:
-    """Masks, LSD segments and tracks of every frame; ``NoTargetError`` when the target is found in
-    fewer than half the frames."""
+def extract(
+    grays: list[FloatArray], full_scale: float, polarity: str, progress: Progress, t_s: FloatArray | None = None
+) -> Features:
+    """Masks, LSD segments and tracks of every frame (times ``t_s`` (F,) s, default the frame
+    index); ``NoTargetError`` when the target is found in fewer than half the frames."""
     targets = [find_target(g, full_scale, polarity) for g in grays]
     found = [k for k, t in enumerate(targets) if t.found]
     if len(found) < max(len(grays) / 2, 2):
@@ -42,21 +54,66 @@ def extract(grays: list[FloatArray], full_scale: float, polarity: str, progress:
     progress("lines", 0.4)
     steps = list(itertools.pairwise(found))
     predicted = parallel_map(_affine_of, [(grays[k], grays[l_], targets[k], targets[l_]) for k, l_ in steps])
+    times = np.arange(len(grays), dtype=float) if t_s is None else t_s
+    predicted = _consistent(grays, targets, steps, predicted, times)
+    untrusted = _untrusted(steps, predicted, times)
     progress("tracking", 0.5)
     pairs: dict[tuple[int, int], list[tuple[int, int]]] = {}
     rotation: dict[tuple[int, int], float] = {}
     affines: dict[tuple[int, int], FloatArray] = {}
-    for (k, l_), A in zip(steps, predicted, strict=True):
-        pairs[(k, l_)] = match(segments[k].ends_px, segments[l_].ends_px, A)
-        affines[(k, l_)] = A
-        rotation[(k, l_)] = float(np.degrees(np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])))
+    for (k, l_), pred, off in zip(steps, predicted, untrusted, strict=True):
+        pairs[(k, l_)] = [] if off else match(segments[k].ends_px, segments[l_].ends_px, pred.affine)
+        affines[(k, l_)] = pred.affine
+        rotation[(k, l_)] = pred.turn_deg
     progress("tracking", 0.6)
     return Features(targets, segments, build_tracks(segments, pairs), rotation, affines)
+
+
+def _turns(
+    steps: list[tuple[int, int]], predicted: list[Prediction], t_s: FloatArray
+) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """Each pair's turn (deg), interval (s) and whether its ECC converged."""
+    turns = np.array([p.turn_deg for p in predicted])
+    dt = np.array([t_s[l_] - t_s[k] for k, l_ in steps], dtype=float)
+    return turns, dt, np.isfinite([p.ecc_rho for p in predicted])
+
+
+def _untrusted(steps: list[tuple[int, int]], predicted: list[Prediction], t_s: FloatArray) -> np.ndarray:
+    """(P,) bool: the pairs not to match across (``tracking.untrusted_pairs``)."""
+    if not steps:
+        return np.zeros(0, dtype=bool)
+    return untrusted_pairs(*_turns(steps, predicted, t_s))
 
 
 def _segments_of(frame: tuple[FloatArray, np.ndarray, TargetMask]) -> Segments:
     return frame_segments(*frame)
 
 
-def _affine_of(pair: tuple[FloatArray, FloatArray, TargetMask, TargetMask]) -> FloatArray:
-    return predict_affine(*pair)[0]
+def _affine_of(pair: tuple[FloatArray, FloatArray, TargetMask, TargetMask]) -> Prediction:
+    return predict_affine(*pair)
+
+
+def _retry_of(pair: tuple[FloatArray, FloatArray, TargetMask, TargetMask, float]) -> Prediction:
+    prev, next_, tp, tn, expected = pair
+    return predict_affine(prev, next_, tp, tn, angles_deg=retry_grid(expected))
+
+
+def _consistent(
+    grays: list[FloatArray], targets: list[TargetMask], steps: list[tuple[int, int]], predicted: list[Prediction],
+    t_s: FloatArray,
+) -> list[Prediction]:  # fmt: skip
+    """``predicted`` with each suspect pair (``tracking.suspect_turns``: its turn far from the median
+    rate's, or its ECC not converged) predicted again about the expected turn, the better kept."""
+    if not steps:
+        return predicted
+    turns, dt, converged = _turns(steps, predicted, t_s)
+    expected = suspect_turns(turns, dt, converged)
+    redo = np.flatnonzero(np.isfinite(expected))
+    retried = parallel_map(
+        _retry_of,
+        [(grays[k], grays[l_], targets[k], targets[l_], float(expected[i])) for i in redo for k, l_ in [steps[i]]],
+    )
+    out = list(predicted)
+    for i, r in zip(redo, retried, strict=True):
+        out[i] = better_prediction(predicted[i], r)
+    return out

@@ -1,6 +1,17 @@
 """Line tracks across frames: predict each frame from the last (the target mask turned about its
 centroid, refined by ECC affine alignment), then match segments by the paper's similarities
-(angle, perpendicular offset, overlap, length ratio), mutual best only."""
+(angle, perpendicular offset, overlap, length ratio), mutual best only.
+
+The grid over in-image rotations can pick an alias: a nearly square bright face (a noisy frame's
+mask holds only the sunlit face of the bus) looks alike turned by 90°, and a mirror-symmetric
+outline looks alike turned by +θ or -θ. Matching through such a prediction chains every edge to a
+neighbouring parallel one, and those tracks mislead the rigid fit (benchmark ``oblique_110_noisy``:
+four pairs predicted 55-71° off, tracks shifted round the bus's four parallel edges, rate 36 %
+off; ``los_109_clean``: two pairs 34° and 84° off, the two longest tracks joined across one, 6.7 %
+off). A spin turns the image at a rate that changes slowly, so a pair whose turn is far from the
+median rate's (or whose ECC did not converge) is predicted again from a grid about the expected
+turn, and the prediction whose ECC correlation is higher is kept (``suspect_turns``,
+``better_prediction``); a pair that still turns the image the other way is not matched across (``untrusted_pairs``)."""
 
 from __future__ import annotations
 
@@ -13,6 +24,14 @@ from .segments import Segments
 from .target import TargetMask
 
 ANGLE_GRID_DEG = np.arange(-60.0, 60.01, 2.0)
+# A pair whose in-image turn is over SUSPECT_TURN_DEG from the median turn rate's is predicted again
+# from a grid of ±RETRY_HALF_WIDTH_DEG about that expected turn (aliases seen: 34-90° off; the right
+# pairs of a benchmark sequence lie within 6° of it, a dropped frame's included).
+SUSPECT_TURN_DEG = 12.0
+# The image turns (the expected turn means something) above this median turn a frame, as the sense
+# hint of the estimate (estimate.py: 3° a median interval).
+TURNING_MIN_DEG = 3.0
+RETRY_HALF_WIDTH_DEG = 10.0
 MAX_ANGLE_DEG = 8.0
 MAX_OFFSET_PX = 5.0
 MIN_SIMILARITY = 0.05
@@ -32,9 +51,34 @@ class Track:
         return len(self.members)
 
 
-def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: TargetMask) -> tuple[FloatArray, float]:
-    """The 2x3 affine taking frame ``prev``'s pixels to ``next_``'s, and the in-image rotation (deg)
-    of the mask grid search that seeded it."""
+@dataclass(frozen=True)
+class Prediction:
+    """A frame pair's image-to-image prediction: the 2x3 affine (px -> px), the grid angle (deg,
+    OpenCV's sense) that seeded it, and the final ECC correlation (NaN when ECC did not converge
+    and the grid's rotation was kept)."""
+
+    affine: FloatArray
+    grid_angle_deg: float
+    ecc_rho: float
+
+    @property
+    def turn_deg(self) -> float:
+        """The affine's in-image rotation (deg, clockwise as displayed)."""
+        return affine_turn_deg(self.affine)
+
+
+def affine_turn_deg(A: FloatArray) -> float:
+    """The rotation (deg, clockwise as displayed: x right, y down) of a 2x3 affine, from its
+    antisymmetric part: ``atan2(A10 - A01, A00 + A11)``."""
+    return float(np.degrees(np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])))
+
+
+def predict_affine(
+    prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: TargetMask, angles_deg: FloatArray = ANGLE_GRID_DEG
+) -> Prediction:
+    """The 2x3 affine taking frame ``prev``'s pixels to ``next_``'s, seeded by the best of the grid
+    ``angles_deg`` (deg, OpenCV's sense: counter-clockwise as displayed, the opposite of
+    ``affine_turn_deg``)."""
     import cv2
 
     assert tp.mask is not None and tn.mask is not None and tp.bbox is not None and tn.bbox is not None
@@ -53,7 +97,7 @@ def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: Targ
     cp = (tp.centroid_px - o) * 0.5
     win = cv2.createHanningWindow((gn.shape[1], gn.shape[0]), cv2.CV_32F)
     best, best_angle, best_shift = -1.0, 0.0, np.zeros(2)
-    for ang in ANGLE_GRID_DEG:
+    for ang in angles_deg:
         R = cv2.getRotationMatrix2D((float(cp[0]), float(cp[1])), float(ang), 1.0)
         warped = cv2.warpAffine(gp, R, (gn.shape[1], gn.shape[0]))
         shift, response = cv2.phaseCorrelate(warped, gn, win)
@@ -66,8 +110,9 @@ def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: Targ
     ip = cv2.GaussianBlur(prev[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
     inn = cv2.GaussianBlur(next_[v0 : v1 + 1, u0 : u1 + 1].astype(np.float32), (0, 0), 2.0)
     warp = cv2.invertAffineTransform(M).astype(np.float32)
+    rho = float("nan")
     try:
-        _, warp = cv2.findTransformECC(  # type: ignore[call-overload]
+        rho, warp = cv2.findTransformECC(  # type: ignore[call-overload]
             inn, ip, warp, cv2.MOTION_AFFINE, (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 60, 1e-5), None, 5
         )
         M = cv2.invertAffineTransform(warp)
@@ -75,7 +120,70 @@ def predict_affine(prev: FloatArray, next_: FloatArray, tp: TargetMask, tn: Targ
         pass  # ECC did not converge: keep the mask rotation
     # Back to full-image coordinates: x_n = A x_p + b in crop coordinates.
     A, b = M[:, :2].astype(float), M[:, 2].astype(float)
-    return np.column_stack([A, A @ -o + b + o]), best_angle
+    return Prediction(np.column_stack([A, A @ -o + b + o]), best_angle, float(rho))
+
+
+def expected_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> FloatArray | None:
+    """Each frame pair's expected turn (deg): the median turn rate of the pairs whose ECC converged
+    times the pair's interval (a dropped frame turns twice as far); None under 3 such pairs.
+
+    Parameters
+    ----------
+    turns_deg : (P,) each pair's turn (deg, ``affine_turn_deg``); dt_s : (P,) its interval (s);
+    converged : (P,) bool, whether its ECC converged.
+    """
+    turns_deg = np.asarray(turns_deg, dtype=float)
+    dt_s = np.asarray(dt_s, dtype=float)
+    if int(np.sum(converged)) < 3:
+        return None
+    return np.asarray(float(np.median(turns_deg[converged] / dt_s[converged])) * dt_s, dtype=float)
+
+
+def suspect_turns(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> FloatArray:
+    """For each frame pair (as ``expected_turns``), its expected turn (deg) when the pair is suspect,
+    else NaN: a pair is suspect when its ECC did not converge or its turn is over
+    ``SUSPECT_TURN_DEG`` from the expected one."""
+    out = np.full(len(turns_deg), np.nan)
+    expected = expected_turns(turns_deg, dt_s, converged)
+    if expected is None:
+        return out
+    bad = ~np.asarray(converged, dtype=bool) | (np.abs(np.asarray(turns_deg) - expected) > SUSPECT_TURN_DEG)
+    out[bad] = expected[bad]
+    return out
+
+
+def untrusted_pairs(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarray) -> np.ndarray:
+    """(P,) bool: the frame pairs (as ``expected_turns``) that still turn the image the other way
+    from the expected turn, by over ``SUSPECT_TURN_DEG``, after the retry, when the image turns (the
+    median expected turn over ``TURNING_MIN_DEG`` a frame). A spin seen off the image plane turns
+    the image one way (its sense), though unevenly (a pair at -22° where -4° is expected can be
+    right: benchmark ``plane_116_clean``, which then kept too few tracks); a pair turned the other
+    way is not the spin. No segment is matched across such a pair: a match through a wrong
+    prediction joins two edges into one track, while a gap is bridged later by the rigid model's
+    re-matching (benchmark ``oblique_116``: with pairs turned +12..+54° against -10° expected
+    matched, the fit ended 35 % off, or too few tracks were left; without, 0.06-0.11 %). When the
+    image does not turn (the axis near the image plane) every pair is kept."""
+    keep_all = np.zeros(len(turns_deg), dtype=bool)
+    expected = expected_turns(turns_deg, dt_s, converged)
+    if expected is None:
+        return keep_all
+    if float(np.median(np.abs(expected))) <= TURNING_MIN_DEG:
+        return keep_all
+    turns = np.asarray(turns_deg, dtype=float)
+    return np.asarray((np.abs(turns - expected) > SUSPECT_TURN_DEG) & (turns * expected < 0), dtype=bool)
+
+
+def retry_grid(expected_turn_deg: float) -> FloatArray:
+    """The grid angles (deg, OpenCV's sense) within ``RETRY_HALF_WIDTH_DEG`` of an expected turn."""
+    return np.arange(-expected_turn_deg - RETRY_HALF_WIDTH_DEG, -expected_turn_deg + RETRY_HALF_WIDTH_DEG + 0.01, 2.0)
+
+
+def better_prediction(first: Prediction, retry: Prediction) -> Prediction:
+    """The retry when its ECC converged to a higher correlation than the first's (or the first's did
+    not converge); both align the same crops, so their correlations compare."""
+    if np.isfinite(retry.ecc_rho) and not (first.ecc_rho >= retry.ecc_rho):
+        return retry
+    return first
 
 
 def _edges(img: FloatArray) -> np.ndarray:
