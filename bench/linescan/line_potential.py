@@ -247,15 +247,23 @@ def line_information(motion: Motion, scene: Scene, sim: FrameCloud, T: float, be
     return np.asarray(info - absorbed)
 
 
-def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> list[list[object]]:
-    """One motion's class shares and bounds (rows of the printed tables)."""
+def _simulated(
+    name: str, distance_m: float, seed: int, size: int
+) -> tuple[Motion, Scene, FrameCloud, NDArray[np.int64], float, list[NDArray[np.float64]]]:
+    """One seeded motion of shape ``name`` and its frames: (motion, scene, simulation, frame index per
+    hit, the first hit's time T in s, each frame's hits in m)."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    noise = scene.scanner.noise
     sim = simulate_frames(motion, scene, seed=seed)
     frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
+    return motion, scene, sim, frame, float(sim.t_s.min()), per_frame
+
+
+def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> list[list[object]]:
+    """One motion's class shares and bounds (rows of the printed tables)."""
+    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
+    noise = scene.scanner.noise
     data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
                    range_sigma_m=noise.range_sigma_m)  # fmt: skip
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
@@ -343,13 +351,8 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     neighbours on the cell's plane; docs/linescan.md.)"""
     from tumblescan.linescan.dense import surfels
 
-    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
+    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
     noise = scene.scanner.noise
-    sim = simulate_frames(motion, scene, seed=seed)
-    frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
     faces = face_of_hits(scene, motion, sim.reference_m)
     b_all = dense_bound(motion, scene, sim, T, faces=faces)
     rows: list[list[object]] = []

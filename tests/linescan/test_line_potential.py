@@ -59,13 +59,20 @@ def test_the_truss_wires_are_beams_and_the_box_has_none() -> None:
     assert np.all(beam_of_hits(box, motion, box_sim.reference_m) == -1)
 
 
-def test_a_wire_is_a_line_at_the_true_motion_and_not_at_a_wrong_one() -> None:
-    motion, scene, sim, T = _truss()
+def _largest_beam_lines(
+    motion: Motion, scene: Scene, sim: FrameCloud, T: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The largest beam's hits (mask), each hit's line of its frame (index), the lines' time
+    offsets from ``T`` (s) and the true motion's parameters at ``T``."""
     on = _largest_beam(beam_of_hits(scene, motion, sim.reference_m))
     key = sim.frame[on].astype(np.int64) * scene.scanner.lines + sim.line[on]
     _, first, line = np.unique(key, return_index=True, return_inverse=True)
-    tau = sim.t_s[on][first] - T
-    x = motion.at_reference(T).params()
+    return on, line, sim.t_s[on][first] - T, motion.at_reference(T).params()
+
+
+def test_a_wire_is_a_line_at_the_true_motion_and_not_at_a_wrong_one() -> None:
+    motion, scene, sim, T = _truss()
+    on, line, tau, x = _largest_beam_lines(motion, scene, sim, T)
     truth = LineMapping(x, tau, tuple(range(9)))
     c, d = _line_through(truth.apply(sim.xyz_true_m[on], line))
     r_true = line_rows(truth, sim.xyz_true_m[on], line, c, d)[0]
@@ -81,11 +88,7 @@ def test_a_wire_is_a_line_at_the_true_motion_and_not_at_a_wrong_one() -> None:
 
 def test_line_rows_derivatives_are_those_of_the_offsets() -> None:
     motion, scene, sim, T = _truss()
-    on = _largest_beam(beam_of_hits(scene, motion, sim.reference_m))
-    key = sim.frame[on].astype(np.int64) * scene.scanner.lines + sim.line[on]
-    _, first, line = np.unique(key, return_index=True, return_inverse=True)
-    tau = sim.t_s[on][first] - T
-    x = motion.at_reference(T).params()
+    on, line, tau, x = _largest_beam_lines(motion, scene, sim, T)
     p = sim.xyz_true_m[on]
     mapping = LineMapping(x, tau, tuple(range(9)))
     c, d = _line_through(mapping.apply(p, line))
