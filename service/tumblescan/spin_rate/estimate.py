@@ -27,6 +27,7 @@ from .search import (
     scan_starts,
     with_drift_if_needed,
 )
+from .tracking import TURNING_MIN_DEG
 
 MIN_TRACK_FRAMES = 3
 LONG_TRACK_FRAMES = 6
@@ -105,7 +106,7 @@ def estimate_spin(
     # off the image plane: ω between 0.6 and 2.5 times it, and its sign is the sense, sign(a·z).
     img_rate = float(np.median([r / (t[l_] - t[k]) for (k, l_), r in feats.rotation_deg.items()]))
     sense_hint = 0
-    if abs(img_rate) * dt_med > 3.0:
+    if abs(img_rate) * dt_med > TURNING_MIN_DEG:
         sense_hint = int(np.sign(img_rate))
         w_lo = max(w_lo, np.radians(0.6 * abs(img_rate)))
         w_hi = min(w_hi, np.radians(IMG_RATE_MAX_FACTOR * abs(img_rate)))

@@ -16,38 +16,34 @@ import numpy as np
 from .._typing import FloatArray
 from ..numerics.parallel import parallel_map
 from .rigid import Observations, RigidFit, fit_rigid
-from .search import axis_polished, common_costs, plane_axes, restarted, same_basin, scan_grid, scan_subset
+from .search import Start, axis_polished, common_costs, plane_axis_starts, restarted, same_basin
 
 # A fit at a rate over RATE_RIVAL_MIN_REL off the winner's whose cost is within this Δχ² (the
 # twin's test) is a rival the data do not rule out (``rate_rivals``).
 RATE_RIVAL_MIN_REL = 0.05
 RATE_RIVAL_DELTA_CHI2 = 9.0
-Start = tuple[float, FloatArray]
 
 
 def peak_fits(
     obs: Observations, fit: RigidFit, peaks_rad_s: list[float], t_ref: float, radius: float
 ) -> list[RigidFit]:
     """Fits of ``obs`` started at each periodogram peak (rad/s) over ``RATE_RIVAL_MIN_REL`` from
-    ``fit``'s rate, each from the image-plane axis (``search.plane_axes``) the scan ranks best at that
-    rate and ``fit``'s centre, then restarted and axis-polished as the search's near-plane finalists.
+    ``fit``'s rate, each from the image-plane axis the scan ranks best at that rate
+    (``search.plane_axis_starts``) and ``fit``'s centre, then restarted and axis-polished as the
+    search's near-plane finalists.
 
     The mask's outline turns with the body whatever the tracks do, so its periodogram peaks near the
     true rate even where the search's starts all led to a slow basin (benchmark plane_109_clean: the
     winner 3.03 deg/s, a fit from the peak 29.36 deg/s at a Δχ² of -39 below it; truth 29.63).
     ``radius``: the target's radius in units of the range; ``t_ref``: reference time (s)."""
-    sub, axes = scan_subset(obs), plane_axes()
-    starts: list[Start] = []
-    for w in peaks_rad_s:
-        if abs(w - fit.omega_rad_s) > RATE_RIVAL_MIN_REL * fit.omega_rad_s:
-            cost = scan_grid(sub, np.array([w]), axes, fit.c0, t_ref, radius)[0]
-            starts.append((float(w), axes[int(np.argmin(cost))]))
-    return parallel_map(partial(_peak_fit, obs, c0=fit.c0, drift=fit.drift, t_ref=t_ref), starts)
+    far = [w for w in peaks_rad_s if abs(w - fit.omega_rad_s) > RATE_RIVAL_MIN_REL * fit.omega_rad_s]
+    starts = plane_axis_starts(obs, np.asarray(far, dtype=float), fit.c0, radius, t_ref)
+    return parallel_map(partial(_peak_fit, obs, drift=fit.drift, t_ref=t_ref), starts)
 
 
-def _peak_fit(obs: Observations, start: Start, *, c0: FloatArray, drift: bool, t_ref: float) -> RigidFit:
-    """One fit of ``peak_fits``: converged from ``start`` (ω, axis), restarted, axis-polished."""
-    fit = fit_rigid(obs, start[0], start[1], c0, t_ref, drift=drift)
+def _peak_fit(obs: Observations, start: Start, *, drift: bool, t_ref: float) -> RigidFit:
+    """One fit of ``peak_fits``: converged from ``start`` (ω, axis, c0), restarted, axis-polished."""
+    fit = fit_rigid(obs, *start, t_ref, drift=drift)
     return axis_polished(obs, restarted(obs, fit, t_ref), t_ref)
 
 

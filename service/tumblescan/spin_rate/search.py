@@ -198,7 +198,18 @@ def plane_ladder_starts(
     (``plane_axes``) the scan ranks best at that rate. ``radius``: the target's radius in units of the
     range; ``c0`` (3,): the centre guess (depth 1); ``t_ref``: the reference time (s)."""
     n = int(np.floor(np.log(w_hi / w_lo) / np.log(PLANE_LADDER_RATIO))) + 1 if w_hi > w_lo else 1
-    rates = np.asarray(w_lo * PLANE_LADDER_RATIO ** np.arange(n), dtype=np.float64)
+    return plane_axis_starts(
+        obs, np.asarray(w_lo * PLANE_LADDER_RATIO ** np.arange(n), dtype=np.float64), c0, radius, t_ref
+    )
+
+
+def plane_axis_starts(obs: Observations, rates: FloatArray, c0: FloatArray, radius: float, t_ref: float) -> list[Start]:
+    """Starts (ω, axis, c0), one for each of ``rates`` (rad/s), with the image-plane axis
+    (``plane_axes``) the scan (``scan_grid`` on ``scan_subset(obs)``) ranks best at that rate.
+    ``c0`` (3,): the centre (depth 1); ``radius``: the target's radius in units of the range;
+    ``t_ref``: the reference time (s)."""
+    if not len(rates):
+        return []
     axes = plane_axes()
     C = scan_grid(scan_subset(obs), rates, axes, c0, t_ref, radius)
     return [(float(w), axes[int(np.argmin(row))], c0) for w, row in zip(rates, C, strict=True)]

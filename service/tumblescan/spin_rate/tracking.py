@@ -23,13 +23,14 @@ from .._typing import FloatArray
 from .segments import Segments
 from .target import TargetMask
 
-ANGLE_GRID_DEG = np.arange(-60.0, 60.01, 2.0)
+ANGLE_STEP_DEG = 2.0
+ANGLE_GRID_DEG = np.arange(-60.0, 60.01, ANGLE_STEP_DEG)
 # A pair whose in-image turn is over SUSPECT_TURN_DEG from the median turn rate's is predicted again
 # from a grid of ±RETRY_HALF_WIDTH_DEG about that expected turn (aliases seen: 34-90° off; the right
 # pairs of a benchmark sequence lie within 6° of it, a dropped frame's included).
 SUSPECT_TURN_DEG = 12.0
-# The image turns (the expected turn means something) above this median turn a frame, as the sense
-# hint of the estimate (estimate.py: 3° a median interval).
+# The image turns (the expected turn means something) above this median turn a frame; the estimate's
+# sense hint uses the same gate (estimate.py: the median turn rate times the median interval).
 TURNING_MIN_DEG = 3.0
 RETRY_HALF_WIDTH_DEG = 10.0
 MAX_ANGLE_DEG = 8.0
@@ -175,7 +176,9 @@ def untrusted_pairs(turns_deg: FloatArray, dt_s: FloatArray, converged: np.ndarr
 
 def retry_grid(expected_turn_deg: float) -> FloatArray:
     """The grid angles (deg, OpenCV's sense) within ``RETRY_HALF_WIDTH_DEG`` of an expected turn."""
-    return np.arange(-expected_turn_deg - RETRY_HALF_WIDTH_DEG, -expected_turn_deg + RETRY_HALF_WIDTH_DEG + 0.01, 2.0)
+    return np.arange(
+        -expected_turn_deg - RETRY_HALF_WIDTH_DEG, -expected_turn_deg + RETRY_HALF_WIDTH_DEG + 0.01, ANGLE_STEP_DEG
+    )
 
 
 def better_prediction(first: Prediction, retry: Prediction) -> Prediction:
