@@ -33,10 +33,13 @@ triangle, so that no near-singular face block enters the Schur complement.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
+from tumblescan.geometry.rotations import axis_from_angles
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.matching import Linearized, Matches, linearize, match
 from tumblescan.linescan.dense.registration import extent_m
@@ -182,6 +185,21 @@ def motion_sigmas_deg(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
     }
 
 
+@dataclass(frozen=True)
+class BoundCovariances:
+    """The motion's parameters at ``T`` (order of :meth:`Motion.params`) and two ``(9, 9)``
+    Cramer-Rao covariances of them: ``facets``, every face's plane a nuisance (the bound of an
+    estimator that models the target as planes), and ``known_shape``, the whole shape known and
+    only its pose at ``T`` a nuisance (6 parameters: the bound of any estimator, even one given
+    the target's exact model)."""
+
+    x: FloatArray
+    facets: FloatArray
+    known_shape: FloatArray
+    points: int
+    faces: int
+
+
 def dense_bound(
     motion: Motion,
     scene: Scene,
@@ -192,13 +210,35 @@ def dense_bound(
     faces: tuple[IntArray, FloatArray] | None = None,
     extra_information: FloatArray | None = None,
 ) -> dict[str, float]:
-    """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units.
+    """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units,
+    of an estimator that models the target as planes (see :func:`bound_covariances`)."""
+    b = bound_covariances(motion, scene, sim, reference_time_s, hits=hits, faces=faces,
+                          extra_information=extra_information)  # fmt: skip
+    return {
+        **{f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(b.x, b.facets).items()},
+        "center_m": float(np.sqrt(np.trace(b.facets[6:9, 6:9]))),
+        "points": b.points,
+        "faces": b.faces,
+    }
+
+
+def bound_covariances(
+    motion: Motion,
+    scene: Scene,
+    sim: FrameCloud,
+    reference_time_s: float,
+    *,
+    hits: NDArray[np.bool_] | None = None,
+    faces: tuple[IntArray, FloatArray] | None = None,
+    extra_information: FloatArray | None = None,
+) -> BoundCovariances:
+    """The bounds at the truth (the noise-free hits, or only ``hits``).
 
     faces: each hit's face and the faces' sensor-frame normals; by default the mesh's
     coplanar triangles (:func:`face_of_hits`). extra_information: ``(9, 9)`` Fisher information
     on the motion (at ``T``, parameter order of :meth:`Motion.params`, its own nuisances already
     eliminated) of other hits, added before the inversion (``bench/linescan/line_potential.py``'s
-    beams modelled as lines).
+    beams modelled as lines); to the facets' bound only.
     """
     truth = motion.at_reference(reference_time_s)
     x = truth.params()
@@ -227,6 +267,11 @@ def dense_bound(
     F_mm = np.zeros((9, 9))
     F_mf = np.zeros((n_faces, 9, 3))
     F_ff = np.zeros((n_faces, 3, 3))
+    # The known shape's pose at T: a small turn dtheta about ``origin`` and a shift dt move the
+    # residual by ``(n x (y - origin)) . dtheta - n . dt``.
+    origin = ref.mean(axis=0)
+    F_mp = np.zeros((9, 6))
+    F_pp = np.zeros((6, 6))
     for start in range(0, len(xyz), CHUNK):
         sl = slice(start, start + CHUNK)
         p, ln, fc = xyz[sl], line[sl], face[sl]
@@ -239,6 +284,9 @@ def dense_bound(
         tilt = np.einsum("nki,ni->nk", tangents[fc], y)
         J_f = np.concatenate([tilt, -np.ones((len(y), 1))], axis=1)
         F_mm += (J_m * w[:, None]).T @ J_m
+        J_p = np.concatenate([np.cross(n, y + centres[fc] - origin), -n], axis=1)
+        F_mp += (J_m * w[:, None]).T @ J_p
+        F_pp += (J_p * w[:, None]).T @ J_p
         # Per-face sums of the outer products, one bincount per entry (thousands of faces).
         for j in range(3):
             wj = w * J_f[:, j]
@@ -253,13 +301,29 @@ def dense_bound(
     absorbed = np.einsum("fij,fjk,flk->il", F_mf[used], np.linalg.pinv(F_ff[used], rcond=1e-10, hermitian=True),
                          F_mf[used])  # fmt: skip
     extra = np.zeros((9, 9)) if extra_information is None else extra_information
-    cov = np.asarray(np.linalg.inv(F_mm - absorbed + extra), dtype=np.float64)
-    return {
-        **{f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(x, cov).items()},
-        "center_m": float(np.sqrt(np.trace(cov[6:9, 6:9]))),
-        "points": len(xyz),
-        "faces": len(used),
-    }
+    return BoundCovariances(
+        x=np.asarray(x, dtype=float),
+        facets=np.asarray(np.linalg.inv(F_mm - absorbed + extra), dtype=np.float64),
+        known_shape=np.asarray(np.linalg.inv(F_mm - F_mp @ np.linalg.solve(F_pp, F_mp.T)), dtype=np.float64),
+        points=len(xyz),
+        faces=len(used),
+    )
+
+
+def share_within(
+    x: FloatArray, cov: FloatArray, axis_limit_deg: float, rate_limit_deg_s: float, draws: int = 20_000
+) -> float:
+    """Probability that an unbiased estimate of covariance ``cov`` about the truth ``x`` has both
+    axes within ``axis_limit_deg`` (angle to the true axis) and both rates within
+    ``rate_limit_deg_s``: what an efficient estimator would score against those limits."""
+    rng = np.random.default_rng(0)
+    xs = rng.multivariate_normal(x, cov, size=draws, method="eigh")
+    ok = np.ones(draws, dtype=bool)
+    for a, b, rate in ((0, 1, 2), (3, 4, 5)):
+        cos = axis_from_angles(xs[:, a], xs[:, b]) @ axis_from_angles(x[a], x[b])
+        ok &= np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) <= axis_limit_deg
+        ok &= np.degrees(np.abs(xs[:, rate] - x[rate])) <= rate_limit_deg_s
+    return float(ok.mean())
 
 
 def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float) -> NDArray[np.bool_]:

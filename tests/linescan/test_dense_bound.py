@@ -7,11 +7,13 @@ import pytest
 from bench.linescan.dense_bound import (
     COPLANAR_DEG,
     COPLANAR_M,
+    bound_covariances,
     box_face_of_hits,
     dense_bound,
     face_of_hits,
     mesh_faces,
     normal_of_triangle,
+    share_within,
 )
 
 from tumblescan import Scanner, Scene, simulate_frames
@@ -105,3 +107,32 @@ def test_the_bound_of_the_rates_does_not_depend_on_the_reference_time() -> None:
     first, middle = (dense_bound(motion, scene, sim, float(t), faces=faces) for t in (sim.t_s[0], np.median(sim.t_s)))
     for key in ("spin_rate_deg_s", "precession_axis_deg", "precession_rate_deg_s", "center_m"):
         assert middle[key] == pytest.approx(first[key], rel=1e-6), key
+
+
+def test_knowing_the_shape_bounds_below_the_planes_model() -> None:
+    # The exact shape with only its pose unknown is a special case of free face planes (a pose
+    # moves every plane), so its bound is below theirs in every direction; knowing the pose too
+    # would be below that.
+    motion = motion_for(2, distance_m=50.0)
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    sim = simulate_frames(motion, scene, seed=2)
+    b = bound_covariances(motion, scene, sim, float(np.median(sim.t_s)))
+    scale = np.sqrt(np.diag(b.facets))
+    gap = (b.facets - b.known_shape) / np.outer(scale, scale)
+    assert np.linalg.eigvalsh(gap).min() > -1e-9
+    assert np.trace(gap) > 0.01  # and the planes' own parameters cost something
+    assert b.faces >= 6 and b.points > 1000  # of the 18
+
+
+def test_share_within_counts_a_gaussian_estimate_against_the_limits() -> None:
+    # Spin rate of 1-sigma = the limit: |z| <= 1 for 68.3 %; a spin axis of isotropic 1-sigma
+    # s per angle (on the equator, where an angle is an arc) errs by a Rayleigh angle, within
+    # L = s sqrt(2) for 1 - e^-1 = 63.2 %; the other parameters far inside their limits.
+    x = np.array([0.3, np.pi / 2, 0.05, 1.0, 0.7, 0.02, 0.0, 0.0, 50.0])
+    tiny = 1e-12
+    rate_limit, axis_limit = 0.05, 0.1
+    cov = np.diag([tiny, tiny, np.radians(rate_limit) ** 2, tiny, tiny, tiny, 1.0, 1.0, 1.0])
+    assert share_within(x, cov, axis_limit, rate_limit) == pytest.approx(0.683, abs=0.01)
+    s = np.radians(axis_limit) / np.sqrt(2)
+    cov = np.diag([s**2, s**2, tiny, tiny, tiny, tiny, 1.0, 1.0, 1.0])
+    assert share_within(x, cov, axis_limit, rate_limit) == pytest.approx(1 - np.exp(-1), abs=0.01)
