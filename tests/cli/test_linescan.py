@@ -51,6 +51,19 @@ def test_estimate_prints_a_readable_summary(sim: Path) -> None:
     assert "spin rate" in proc.stdout and "swarm(naiwpso)+lm" in proc.stdout
 
 
+def test_the_summary_states_the_centres_sigmas_in_millimetres(sim: Path) -> None:
+    from tumblescan.cli.linescan import format_result
+
+    proc = run("estimate", str(sim / "tracks.json"), "--json")
+    result = MotionResult.model_validate_json(proc.stdout)
+    # A sub-millimetre sigma must not print as 0.000 m.
+    sigma_m = [0.00042, 0.0013, 0.000087]
+    shown = format_result(result.model_copy(update={"uncertainty": result.uncertainty.model_copy(
+        update={"center_m": sigma_m})})).splitlines()  # fmt: skip
+    centre = next(line for line in shown if line.startswith("centre"))
+    assert centre.endswith("+- [0.42, 1.3, 0.087] mm")
+
+
 def test_rectify_writes_a_cloud_near_the_truth(sim: Path, tmp_path: Path) -> None:
     result = run("estimate", str(sim / "tracks.json"), "--json", "--reference-time-s", "0")
     (tmp_path / "r.json").write_text(result.stdout)

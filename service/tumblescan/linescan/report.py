@@ -102,7 +102,7 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
             "centre (m)",
             "precession.center_m",
             r.precession.center_m,
-            value_text(u.center_m, 4),
+            "[" + ", ".join(f"{1000 * x:.2g}" for x in u.center_m) + "] mm",  # sub-mm: 4 decimals of m showed 0
             t and t.center_m,
             "center_m",
         )

@@ -56,7 +56,7 @@ def comparison_table(result: MotionResult, truth: Motion) -> str:
         (
             "centre (m)",
             _v(result.precession.center_m, 3),
-            _v(u.center_m, 3),
+            "[" + ", ".join(f"{x:.2g}" for x in u.center_m) + "]",
             _v(truth.center_m, 3),
             f"{err['center_m']:.2e} m",
         )
