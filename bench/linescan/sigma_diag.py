@@ -275,6 +275,47 @@ def variants(paths: list[Path]) -> None:
               f"median sigma/bound {np.median(sb_all):.2f}")  # fmt: skip
 
 
+def compare(tags: list[str]) -> None:
+    """Per case of the captures of each tag: the worst |error| / reported sigma and the median
+    over the four parameters of sigma / bound; per shape and range, the count over 3 sigma and
+    the median sigma / bound."""
+    runs = {t: {(c["shape"], c["distance_m"], c["seed"]): c for c in map(pickle.loads, (
+        p.read_bytes() for p in out_dir().glob(f"sigma_capture_{t}_*.pkl")))} for t in tags}  # fmt: skip
+    keys = sorted(set.intersection(*(set(r) for r in runs.values())))
+
+    def worst(c: dict[str, Any]) -> tuple[float, str]:
+        e = c["errors"]
+        ratios = {p: e[f"{p}_sigma"] for p in PARAMS if np.isfinite(e[f"{p}_sigma"])}
+        p = max(ratios, key=lambda k: ratios[k])
+        return ratios[p], p
+
+    def sb(c: dict[str, Any]) -> float:
+        e, b = c["errors"], c["bound"]
+        return float(np.nanmedian([e[f"{p}_sd"] / b[f"{p}_{UNITS[p]}"] for p in PARAMS]))
+
+    rows = []
+    for k in keys:
+        cells: list[object] = [k[0], f"{k[1]:g}", k[2]]
+        for t in tags:
+            w, p = worst(runs[t][k])
+            cells.append(f"{w:.2f} {p.split('_')[0][0]}{p.split('_')[1][0]} / {sb(runs[t][k]):.2f}")
+        rows.append(cells)
+    print(table(rows, ["shape", "m", "seed", *tags]))
+    print("cells: worst |error|/sigma, its parameter (sa, sr, pa, pr) / median sigma over bound")
+    groups = sorted({(k[0], k[1]) for k in keys})
+    rows = []
+    for g in groups:
+        ks = [k for k in keys if k[:2] == g]
+        cells = [g[0], f"{g[1]:g}", len(ks)]
+        for t in tags:
+            ws = [worst(runs[t][k])[0] for k in ks]
+            cells.append(
+                f"{sum(w > 3 for w in ws)} / max {max(ws):.2f} / {np.median([sb(runs[t][k]) for k in ks]):.2f}"
+            )
+        rows.append(cells)
+    print(table(rows, ["shape", "m", "cases", *[f"{t}: over 3 / max / sigma:bound" for t in tags]]))
+
+
 # --- noise draws from the truth -----------------------------------------------------------
 
 
@@ -373,6 +414,26 @@ def _one_face_only(build: Any, scene: Scene, motion: Any, sim: Any) -> Any:
     return run
 
 
+def _eroded(surf: Any, data: Any, *, border_only: bool) -> Any:
+    """``surf`` with the planar cells beside a non-planar one (any of the 4 side neighbours in
+    the view; ``border_only``: beside a cell that is missing or not interior, a silhouette or
+    occlusion border) made non-planar: candidate rules against edge-straddling surfels."""
+    from dataclasses import replace
+
+    from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS
+
+    nb = data.neighbours[:, list(SIDE_NEIGHBOURS)]
+    safe = np.maximum(nb, 0)
+    beside = (nb < 0) | ~data.interior[safe] if border_only else (nb < 0) | ~surf.planar[safe]
+    kept = surf.planar & ~beside.any(axis=1)
+    print(f"  {variant_name(border_only)}: planar cells {int(surf.planar.sum())} -> {int(kept.sum())}")
+    return replace(surf, planar=kept)
+
+
+def variant_name(border_only: bool) -> str:
+    return "erode-border" if border_only else "erode"
+
+
 def _sig_canonical(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
     out = {}
     for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
@@ -385,7 +446,7 @@ def _sig_canonical(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("mode", choices=["capture", "draws", "variants", "attribute"])
+    parser.add_argument("mode", choices=["capture", "draws", "variants", "attribute", "compare"])
     parser.add_argument("paths", nargs="*", type=Path)
     parser.add_argument("--shapes", nargs="+", default=["octagon-truss"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
@@ -393,11 +454,15 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--tag", default="before")
-    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside"]
+    parser.add_argument("--tags", nargs="+", default=["before", "after"], help="compare: the captures' tags")
+    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside", "erode", "erode-border"]
     parser.add_argument("--variant", default="", choices=variants_, help="draws, capture, attribute: see each")
     args = parser.parse_args()
     if args.mode == "variants":
         variants(args.paths)
+        return
+    if args.mode == "compare":
+        compare(args.tags)
         return
     for name in args.shapes:
         for d in args.distances:
@@ -446,6 +511,8 @@ def attribute(name: str, distance_m: float, seed: int, size: int, noisy: bool, v
         surf = surfels_mod.build_surfels(data, mapping, noise)
     finally:
         surfels_mod.beside_face = beside
+    if variant in ("erode", "erode-border"):
+        surf = _eroded(surf, data, border_only=variant == "erode-border")
     names, tri_part = part_of_triangles(scene.shape)
     part = part_of_hits(scene, motion, sim, tri_part)
     kind = np.array([n.split(":")[1] for n in names])
