@@ -186,10 +186,14 @@ class LineMapping:
     @cached_property
     def dRt(self) -> FloatArray:
         """``(lines, 9, k)``: row ``3a + b`` holds ``d(R^T)[a, b]`` for each free parameter."""
-        probes = np.tile(self.x.astype(complex), (len(self.free), 1))
-        probes[np.arange(len(self.free)), list(self.free)] += 1j * STEP
-        dRt = _rotations_T(probes, self.tau_s).imag / STEP  # (k, lines, 3, 3)
-        return np.ascontiguousarray(dRt.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(self.free)))
+        # The centre (parameters 6-8) does not enter R: its columns are zero, not probed.
+        turning = [j for j, p in enumerate(self.free) if p < 6]
+        probes = np.tile(self.x.astype(complex), (len(turning), 1))
+        probes[np.arange(len(turning)), [self.free[j] for j in turning]] += 1j * STEP
+        dRt = np.zeros((len(self.tau_s), 9, len(self.free)))
+        step = _rotations_T(probes, self.tau_s).imag / STEP  # (turning, lines, 3, 3)
+        dRt[:, :, turning] = step.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(turning))
+        return dRt
 
     @cached_property
     def _rows(self) -> FloatArray:
@@ -197,33 +201,34 @@ class LineMapping:
         return np.ascontiguousarray(self.Rt.reshape(len(self.tau_s), 9).T)
 
     def apply(self, xyz: FloatArray, line: IntArray) -> FloatArray:
-        return self._mapped(xyz, line, about_center=False)
+        return self._turned(xyz, line, center=self.center, about_center=False)
 
     def apply_about_center(self, xyz: FloatArray, line: IntArray) -> FloatArray:
         """``apply(xyz, line) - center``, rounded as that is (the surfel build works about the centre)."""
-        return self._mapped(xyz, line, about_center=True)
+        return self._turned(xyz, line, center=self.center, about_center=True)
 
-    def _mapped(self, xyz: FloatArray, line: IntArray, *, about_center: bool) -> FloatArray:
-        """``O_p + R^T (p - O_p)`` per row, less ``O_p`` when ``about_center``. The lines' entries
-        are gathered in chunks that stay in cache, and each row's products summed in the order
-        ``b = 0, 1, 2``, as the einsum over the gathered ``(n, 3, 3)`` did (same rounding, half
-        the time on the millions of points a surfel build maps)."""
-        c = self.center
+    def rotate(self, v: FloatArray, line: IntArray) -> FloatArray:
+        return self._turned(v, line, center=None, about_center=False)
+
+    def _turned(self, xyz: FloatArray, line: IntArray, *, center: FloatArray | None, about_center: bool) -> FloatArray:
+        """``O_p + R^T (p - O_p)`` per row (``R^T p`` without a ``center``), less ``O_p`` when
+        ``about_center``. The lines' entries are gathered in chunks that stay in cache, and each
+        row's products summed in the order ``b = 0, 1, 2``, as the einsum over the gathered
+        ``(n, 3, 3)`` did (same rounding, half the time on the millions of points a surfel
+        build maps)."""
         rows = self._rows
         out = np.empty((len(xyz), 3))
         for s in range(0, len(xyz), APPLY_CHUNK):
-            v = (xyz[s : s + APPLY_CHUNK] - c).T
+            v = (xyz[s : s + APPLY_CHUNK] if center is None else xyz[s : s + APPLY_CHUNK] - center).T
             ln = line[s : s + APPLY_CHUNK]
             o = out[s : s + APPLY_CHUNK]
             for a in range(3):
                 o[:, a] = rows[3 * a][ln] * v[0] + rows[3 * a + 1][ln] * v[1] + rows[3 * a + 2][ln] * v[2]
-            o += c
-            if about_center:
-                o -= c
+            if center is not None:
+                o += center
+                if about_center:
+                    o -= center
         return out
-
-    def rotate(self, v: FloatArray, line: IntArray) -> FloatArray:
-        return np.asarray(np.einsum("nij,nj->ni", self.Rt[line], v))
 
     def normal_derivative(self, n: FloatArray, xyz: FloatArray, line: IntArray) -> FloatArray:
         """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``; the centre enters as ``(I - R^T)``."""
