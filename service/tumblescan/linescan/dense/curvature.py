@@ -54,8 +54,9 @@ def foot_offset(
     e1, e2 = perpendiculars(normal)  # (k, 3) each
     dp = centre[j] - centre[i]
     dn = normal[j] - normal[i]
-    p1, p2 = np.einsum("ni,ni->n", dp, e1[i]), np.einsum("ni,ni->n", dp, e2[i])
-    n1, n2 = np.einsum("ni,ni->n", dn, e1[i]), np.einsum("ni,ni->n", dn, e2[i])
+    e1_i, e2_i = e1[i], e2[i]
+    p1, p2 = np.einsum("ni,ni->n", dp, e1_i), np.einsum("ni,ni->n", dp, e2_i)
+    n1, n2 = np.einsum("ni,ni->n", dn, e1_i), np.einsum("ni,ni->n", dn, e2_i)
     # Rows (p1, p2, 0) -> n1 and (0, p1, p2) -> n2 for K = [[k11, k12], [k12, k22]]: the
     # normal equations' sums per cell, each the bincount of its products (the zero entries of
     # the rows add nothing; the sums of p1 p1, p1 p2 and p2 p2 serve both rows and the spread).

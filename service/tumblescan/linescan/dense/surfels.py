@@ -290,10 +290,14 @@ def _shared_normals(
     idx = np.flatnonzero(use)
     tree = cKDTree(mean[idx])
     pairs = tree.query_pairs(radius_m, output_type="ndarray")
-    i = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(len(idx))])
-    j = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(len(idx))])
-    agree = np.einsum("ni,ni->n", normal[idx[i]], normal[idx[j]]) > np.cos(SHARED_MAX_ANGLE)
-    i, j = i[agree], j[agree]
+    # Each pair's agreement once for both of its directions (the same products and sums).
+    used_normal = normal[idx]
+    limit = np.cos(SHARED_MAX_ANGLE)
+    pair_ok = np.einsum("ni,ni->n", used_normal[pairs[:, 0]], used_normal[pairs[:, 1]]) > limit
+    self_ok = np.einsum("ni,ni->n", used_normal, used_normal) > limit
+    a, b, own = pairs[pair_ok, 0], pairs[pair_ok, 1], np.flatnonzero(self_ok)
+    i = np.concatenate([a, b, own])
+    j = np.concatenate([b, a, own])
     n = count[idx]
     m = mean[idx]
     moments = np.concatenate(
