@@ -215,16 +215,16 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     ci = compact[cell[pts]]
     # z^2 and the squared in-plane offset of every point from the plane of each valid
     # neighbour: (point, neighbour) flattened, the neighbours' planes as one table of c * 8 rows.
-    z2 = np.full(len(pts) * 8, np.inf)
-    in_plane2 = np.full(len(pts) * 8, np.inf)
+    z2_flat = np.full(len(pts) * 8, np.inf)
+    in_plane2_flat = np.full(len(pts) * 8, np.inf)
     pair = np.flatnonzero(valid[ci].reshape(-1))
     p = pair // 8
     q = ci[p] * 8 + pair % 8
     offset = mapped_m[pts[p]] - c_k.reshape(-1, 3)[q]
     d = np.einsum("ni,ni->n", offset, n_k.reshape(-1, 3)[q])
-    in_plane2[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
-    z2[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2[pair])
-    z2, in_plane2 = z2.reshape(-1, 8), in_plane2.reshape(-1, 8)
+    in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
+    z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
+    z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
     best = np.argmin(z2, axis=1)
     gate = BESIDE_MAX_SIGMAS**2
     on_plane = z2[np.arange(len(pts)), best] <= gate
