@@ -26,7 +26,8 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from ..._typing import FloatArray
-from ...target.motion import N_PARAMS, canonical_params, rotation_matrices
+from ...geometry.rotations import axis_from_angles, rotation_matrix
+from ...target.motion import N_PARAMS, canonical_params
 from ..initializer import InitialGuess, InitializerError, cone_from_transforms, motion_from_transforms
 
 # A registered pair agrees with a hypothesis when the rotations differ by less than this:
@@ -46,8 +47,24 @@ class Consensus:
 
 def pair_misfit(x: FloatArray, Rs: FloatArray, tau_from_s: FloatArray, tau_to_s: FloatArray) -> FloatArray:
     """``|log(Q_k(x)^T R_k)|`` for each pair: the angle between predicted and registered rotation."""
-    Q = rotation_matrices(x, tau_to_s) @ np.swapaxes(rotation_matrices(x, tau_from_s), 1, 2)
-    return np.asarray(np.linalg.norm(Rotation.from_matrix(np.swapaxes(Q, 1, 2) @ Rs).as_rotvec(), axis=1))
+    return pair_misfits(np.asarray(x, dtype=float)[None, :], Rs, tau_from_s, tau_to_s)[0]
+
+
+def pair_misfits(xs: FloatArray, Rs: FloatArray, tau_from_s: FloatArray, tau_to_s: FloatArray) -> FloatArray:
+    """:func:`pair_misfit` of each hypothesis ``xs`` ``(h, 9)`` at once, ``(h, P)``: the
+    consensus scores hundreds of them, and one at a time most of the cost was numpy's per-call
+    overhead on 3 x 3 matrices. Each entry is computed as :func:`target.motion.rotation_matrices`
+    computes it, elementwise, so the values are those of one hypothesis at a time."""
+
+    def rotations(tau: FloatArray) -> FloatArray:
+        l_s = axis_from_angles(xs[:, 0], xs[:, 1])[:, None, :]
+        l_p = axis_from_angles(xs[:, 3], xs[:, 4])[:, None, :]
+        return np.asarray(rotation_matrix(l_p, xs[:, 5:6] * tau) @ rotation_matrix(l_s, xs[:, 2:3] * tau))
+
+    to, since = rotations(np.asarray(tau_to_s, dtype=float)), rotations(np.asarray(tau_from_s, dtype=float))
+    Q = to @ np.swapaxes(since, -1, -2)
+    E = (np.swapaxes(Q, -1, -2) @ Rs).reshape(-1, 3, 3)
+    return np.asarray(np.linalg.norm(Rotation.from_matrix(E).as_rotvec(), axis=1).reshape(len(xs), len(Rs)))
 
 
 def cone_consensus(
@@ -123,7 +140,7 @@ def cone_hypotheses(
     if not found:
         return np.empty((0, N_PARAMS)), np.empty(0)
     hypotheses = np.array(found)
-    misfit = np.array([pair_misfit(x, Rs, tau_from, tau_to) for x in hypotheses])
+    misfit = pair_misfits(hypotheses, Rs, tau_from, tau_to)
     return hypotheses, _truncated_score(misfit, inlier_rad)
 
 

@@ -54,24 +54,28 @@ def foot_offset(
     e1, e2 = perpendiculars(normal)  # (k, 3) each
     dp = centre[j] - centre[i]
     dn = normal[j] - normal[i]
-    p1, p2 = np.einsum("ni,ni->n", dp, e1[i]), np.einsum("ni,ni->n", dp, e2[i])
-    n1, n2 = np.einsum("ni,ni->n", dn, e1[i]), np.einsum("ni,ni->n", dn, e2[i])
-    # Rows (p1, p2, 0) -> n1 and (0, p1, p2) -> n2 for K = [[k11, k12], [k12, k22]].
+    e1_i, e2_i = e1[i], e2[i]
+    p1, p2 = np.einsum("ni,ni->n", dp, e1_i), np.einsum("ni,ni->n", dp, e2_i)
+    n1, n2 = np.einsum("ni,ni->n", dn, e1_i), np.einsum("ni,ni->n", dn, e2_i)
+    # Rows (p1, p2, 0) -> n1 and (0, p1, p2) -> n2 for K = [[k11, k12], [k12, k22]]: the
+    # normal equations' sums per cell, each the bincount of its products (the zero entries of
+    # the rows add nothing; the sums of p1 p1, p1 p2 and p2 p2 serve both rows and the spread).
+    q11, q12, q22 = (np.bincount(i, u * v, minlength=k) for u, v in ((p1, p1), (p1, p2), (p2, p2)))
     M = np.zeros((k, 3, 3))
+    M[:, 0, 0] = q11
+    M[:, 0, 1] = M[:, 1, 0] = q12
+    M[:, 1, 1] = q22 + q11  # row one's p2 p2, then row two's p1 p1
+    M[:, 1, 2] = M[:, 2, 1] = q12
+    M[:, 2, 2] = q22
     b = np.zeros((k, 3))
-    rows = ((p1, p2, np.zeros_like(p1), n1), (np.zeros_like(p1), p1, p2, n2))
-    for a0, a1, a2, y in rows:
-        a = (a0, a1, a2)
-        for r in range(3):
-            b[:, r] += np.bincount(i, a[r] * y, minlength=k)
-            for c in range(r, 3):
-                M[:, r, c] += np.bincount(i, a[r] * a[c], minlength=k)
-    M = np.triu(M) + np.transpose(np.triu(M, 1), (0, 2, 1))
+    b[:, 0] = np.bincount(i, p1 * n1, minlength=k)
+    b[:, 1] = np.bincount(i, p2 * n1, minlength=k) + np.bincount(i, p1 * n2, minlength=k)
+    b[:, 2] = np.bincount(i, p2 * n2, minlength=k)
     # In-plane spread of the neighbours' centres: too thin (a row of cells) leaves K unknown.
     S_pp = np.zeros((k, 2, 2))
-    S_pp[:, 0, 0] = np.bincount(i, p1 * p1, minlength=k)
-    S_pp[:, 0, 1] = S_pp[:, 1, 0] = np.bincount(i, p1 * p2, minlength=k)
-    S_pp[:, 1, 1] = np.bincount(i, p2 * p2, minlength=k)
+    S_pp[:, 0, 0] = q11
+    S_pp[:, 0, 1] = S_pp[:, 1, 0] = q12
+    S_pp[:, 1, 1] = q22
     n_nb = np.bincount(i, minlength=k)
     spread_w = np.linalg.eigvalsh(S_pp)
     ok = (n_nb >= CURVATURE_MIN_NEIGHBOURS) & (spread_w[:, 0] >= CURVATURE_MIN_SPREAD**2 * spread_w[:, 1])

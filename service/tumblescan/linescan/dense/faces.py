@@ -213,27 +213,35 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     compact[cells] = np.arange(len(cells))
     pts = np.flatnonzero(compact[cell] >= 0)
     ci = compact[cell[pts]]
-    z2 = np.full((len(pts), 8), np.inf)
-    in_plane2 = np.full((len(pts), 8), np.inf)
-    for j in range(8):
-        on = np.flatnonzero(valid[ci, j])
-        cj = ci[on]
-        offset = mapped_m[pts[on]] - c_k[cj, j]
-        d = np.einsum("ni,ni->n", offset, n_k[cj, j])
-        in_plane2[on, j] = np.einsum("ni,ni->n", offset, offset) - d**2
-        z2[on, j] = d**2 / (v_k[cj, j] + t_k[cj, j] * in_plane2[on, j])
-    rows = np.arange(len(pts))
+    # z^2 and the squared in-plane offset of every point from the plane of each valid
+    # neighbour: (point, neighbour) flattened, the neighbours' planes as one table of c * 8 rows.
+    z2_flat = np.full(len(pts) * 8, np.inf)
+    in_plane2_flat = np.full(len(pts) * 8, np.inf)
+    pair = np.flatnonzero(valid[ci].reshape(-1))
+    p = pair // 8
+    q = ci[p] * 8 + pair % 8
+    offset = mapped_m[pts[p]] - c_k.reshape(-1, 3)[q]
+    d = np.einsum("ni,ni->n", offset, n_k.reshape(-1, 3)[q])
+    in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
+    z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
+    z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
     best = np.argmin(z2, axis=1)
     gate = BESIDE_MAX_SIGMAS**2
+    on_plane = z2[np.arange(len(pts)), best] <= gate
     # The face is the one whose plane fits; the surfel of that face the nearest along it, and
     # the point is taken when it lies on that surfel's plane. The best-fitting of the face's
     # surfels would sort the points by the sign of their noise (their planes differ by their
     # own noise): on the folded wall the centroids of the surfels that took points in were 4
-    # standard errors off their face (rms), against 1.0 elsewhere.
-    recv = np.argmin(np.where(apart[ci, best], np.inf, in_plane2), axis=1)
-    on_plane = z2[rows, best] <= gate
-    take = (z2[rows, recv] <= gate) & ~np.any((z2 <= gate) & apart[ci, recv], axis=1)
-    k = nb[ci, recv]
+    # standard errors off their face (rms), against 1.0 elsewhere. (Only a point on some plane
+    # can lie on the receiver's, so only those are weighed.)
+    fit = np.flatnonzero(on_plane)
+    cf, zf = ci[fit], z2[fit]
+    recv = np.argmin(np.where(apart[cf, best[fit]], np.inf, in_plane2[fit]), axis=1)
+    rows = np.arange(len(fit))
+    take = np.zeros(len(pts), dtype=bool)
+    take[fit] = (zf[rows, recv] <= gate) & ~np.any((zf <= gate) & apart[cf, recv], axis=1)
+    k = np.zeros(len(pts), dtype=np.int64)
+    k[fit] = nb[cf, recv]
     if not np.any(take):
         return point_cell
     # Points on no neighbour's plane, of every frame: another frame cuts the edge elsewhere, or
