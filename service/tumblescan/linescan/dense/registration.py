@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..._open3d import load_open3d
+from ..._open3d import load_open3d, one_thread
 from ..._typing import FloatArray
 
 if TYPE_CHECKING:
@@ -65,8 +65,14 @@ def register_consecutive(
     frames_xyz: one ``(n_k, 3)`` array per frame, metres, sensor frame. voxel_m: downsampling
     voxel. initial: start ICP from these transforms instead of a global RANSAC search.
     """
-    o3d = load_open3d()
+    with one_thread():  # repeatable: see one_thread
+        return _register(frames_xyz, voxel_m=voxel_m, initial=initial, seed=seed)
 
+
+def _register(
+    frames_xyz: list[FloatArray], *, voxel_m: float, initial: PairTransforms | None, seed: int
+) -> PairTransforms:
+    o3d = load_open3d()
     o3d.utility.random.seed(seed)
     prepared = [_prepare(f, voxel_m, features=initial is None) for f in frames_xyz]
     Rs, ts, fit, rmse = [], [], [], []
