@@ -18,6 +18,8 @@ class FakeFit:
     scale: float
     frame_rms_m: np.ndarray
     x: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0]))
+    residuals: int = 1000
+    cov: np.ndarray = field(default_factory=lambda: np.eye(9))
 
 
 def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, int]]) -> list[str]:
@@ -65,6 +67,17 @@ def test_a_frame_without_a_match_is_not_a_reason_for_another_start(monkeypatch: 
     made = script(monkeypatch, [(1.0, True, 1), (1.0, True, 0), (1.0, True, 0)])
     _, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert made == ["vote"] and attempts == 1 and warnings == []
+
+
+def test_most_frames_without_a_match_lead_to_the_next_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    # 6 of 10 frames unmatched: the motion, not the views, is at fault; 5 of 10 is still the views.
+    made = script(monkeypatch, [(1.0, True, 6), (1.0, True, 0), (1.0, True, 0)])
+    best, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert made == ["vote", "consensus"] and attempts == 2
+    assert "6 of 10 frames matched no surface in another" in warnings[-1]
+    assert best.solve.path == "registration+consensus+dense"
+    made = script(monkeypatch, [(1.0, True, 5), (1.0, True, 0), (1.0, True, 0)])
+    assert est.best_attempt(Setup(), None, 7)[2] == 1  # type: ignore[arg-type]
 
 
 def test_when_no_start_is_sound_the_least_flawed_is_kept_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -171,3 +184,26 @@ def test_no_patch_matched_from_any_start_is_the_frames_fault(monkeypatch: pytest
     with pytest.raises(est.NoSurfacesError, match="no planar patch"):
         est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert made == ["vote", "consensus", "swarm"]
+
+
+def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Seen on the long array at 50 m (seed 8): the Wald test found no precession, the spin-only
+    # refit matched no surface across frames, and the result read 30.86 +- 0 deg/s with a
+    # passed check.
+    full = FakeFit(1.05, np.full(10, 0.02))
+    lost = FakeFit(0.0, np.full(10, np.nan), residuals=0)
+    monkeypatch.setattr(est, "precession_p_value", lambda x, cov: 0.99)
+    monkeypatch.setattr(est, "refine_dense", lambda *a, **k: lost)
+    setup = type("S", (Setup,), {"data": type("D", (), {"n_frames": 10})(), "noise": None})()
+    setup.opts = type("O", (), {"seed": 0, "model": "auto", "significance": 0.05, "dense": None})()
+    solve = est.Solve(full, type("G", (), {"x_spin_only": full.x})(), 10, "registration+cone+dense")  # type: ignore[arg-type]
+    attempt = est._judged(setup, solve, 10, [])
+    assert attempt.fit is full
+    assert "spin-only refit does not fit the frames (no surface of one frame matched in another)" in attempt.warnings[0]
+    # And such a fit is never taken as sound.
+    assert est.poor_fit(lost) is not None  # type: ignore[arg-type]
+    # A spin-only refit that fits is reported as before.
+    fits = FakeFit(1.0, np.full(10, 0.02))
+    monkeypatch.setattr(est, "refine_dense", lambda *a, **k: fits)
+    attempt = est._judged(setup, solve, 10, [])
+    assert attempt.fit is fits and "reporting the spin-only model" in attempt.warnings[0]
