@@ -24,13 +24,14 @@ import argparse
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, random_motion, simulate_frames
+from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
 from tumblescan.linescan.dense.covariance import patches, sandwich
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels, prepare
 from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import canonical_cov
 
 from ..common import table
@@ -128,6 +129,19 @@ def designs(
     return out, line
 
 
+def at_truth(motion: Motion, scene: Scene, noise_seed: int) -> tuple[FrameCloud, DenseData, LineMapping, Surfels]:
+    """Frames of ``motion`` (noise drawn with ``noise_seed``), reference time their first point's,
+    and the surfels built at the true motion as the estimator builds them."""
+    sim = simulate_frames(motion, scene, seed=noise_seed)
+    frame = sim.frame.astype(np.int64)
+    T = float(sim.t_s.min())
+    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+                   range_sigma_m=scene.scanner.noise.range_sigma_m)  # fmt: skip
+    mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
+    return sim, data, mapping, build_surfels(data, mapping, scene.scanner.noise)
+
+
 def case(name: str, distance_m: float, seed: int, size: int, draws: int) -> None:
     """Motion ``seed``; noise draws ``seed, seed + 1000, ...``; the bound of the first draw."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
@@ -135,15 +149,8 @@ def case(name: str, distance_m: float, seed: int, size: int, draws: int) -> None
     noise = scene.scanner.noise
     sq: dict[tuple[str, str], list[dict[str, float]]] = {}
     for draw in range(draws):
-        sim = simulate_frames(motion, scene, seed=seed + 1000 * draw)
-        frame = sim.frame.astype(np.int64)
-        T = float(sim.t_s.min())
-        per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-        data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                       range_sigma_m=noise.range_sigma_m)  # fmt: skip
-        x_true = motion.at_reference(T).params()
-        mapping = LineMapping(x_true, data.tau_s, tuple(range(9)))
-        surf = build_surfels(data, mapping, noise)
+        sim, data, mapping, surf = at_truth(motion, scene, seed + 1000 * draw)
+        T, x_true = float(sim.t_s.min()), mapping.x
         if draw == 0:
             kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
             used = np.zeros(len(sim.xyz_m), dtype=bool)
