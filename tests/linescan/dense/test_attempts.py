@@ -200,6 +200,9 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     attempt = est._judged(setup, solve, 10, [])
     assert attempt.fit is full
     assert "spin-only refit does not fit the frames (no surface of one frame matched in another)" in attempt.warnings[0]
+    # Another start should try to pin the precession down; this one ranks after a sound one.
+    doubted = attempt
+    assert doubted.problem() is not None and "spin-only refit does not fit" in doubted.problem()  # type: ignore[operator]
     # And such a fit is never taken as sound.
     assert est.poor_fit(lost) is not None  # type: ignore[arg-type]
     # A spin-only refit that fits is reported as before.
@@ -207,3 +210,4 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     monkeypatch.setattr(est, "refine_dense", lambda *a, **k: fits)
     attempt = est._judged(setup, solve, 10, [])
     assert attempt.fit is fits and "reporting the spin-only model" in attempt.warnings[0]
+    assert attempt.problem() is None and attempt.flaws() < doubted.flaws()

@@ -31,6 +31,7 @@ from .surfels import DenseData
 RETIME_PASSES = 2
 # A refined motion whose residuals are this many times their model sigma is wrong.
 POOR_SCALE = 3.0
+CHECK_FAILED = "the two-frame-count check failed"
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
 
@@ -80,6 +81,9 @@ class Attempt:
     fit: DenseFit
     check: Similarity | None
     warnings: list[str]
+    # The model choice contradicted itself: no significant precession, yet the spin-only model
+    # does not fit (a start whose motion cannot pin the precession down, not the motion).
+    model_doubt: str | None = None
 
     def problem(self) -> str | None:
         """Why another start should be tried, or None when this one is sound. A frame without a
@@ -92,16 +96,18 @@ class Attempt:
         unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
         if unmatched > len(self.fit.frame_rms_m) // 2:
             return f"{unmatched} of {len(self.fit.frame_rms_m)} frames matched no surface in another"
+        if self.model_doubt is not None:
+            return self.model_doubt
         if self.check is not None and not self.check.passed:
-            return "the two-frame-count check failed"
+            return CHECK_FAILED
         return None
 
-    def flaws(self) -> tuple[bool, bool, int, float]:
-        """Order of preference: a fit that is not poor, a check that passed, fewer unmatched
-        frames, smaller residuals."""
+    def flaws(self) -> tuple[bool, bool, bool, int, float]:
+        """Order of preference: a fit that is not poor, a model choice without doubt, a check
+        that passed, fewer unmatched frames, smaller residuals."""
         failed = self.check is not None and not self.check.passed
         unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
-        return (poor_fit(self.fit) is not None, failed, unmatched, self.fit.scale)
+        return (poor_fit(self.fit) is not None, self.model_doubt is not None, failed, unmatched, self.fit.scale)
 
 
 def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[Attempt, list[str], int]:
@@ -169,7 +175,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
 
 def _check_only(attempt: Attempt | None) -> bool:
     """Whether the attempt's motion fits the points and failed the check only."""
-    return attempt is not None and poor_fit(attempt.fit) is None and attempt.problem() is not None
+    return attempt is not None and attempt.problem() == CHECK_FAILED
 
 
 def _judged(setup: Setup, solve: Solve, n2: int, warnings: list[str]) -> Attempt:
@@ -177,6 +183,7 @@ def _judged(setup: Setup, solve: Solve, n2: int, warnings: list[str]) -> Attempt
     fit, opts = solve.fit, setup.opts
     # 4. Model choice.
     p_value = precession_p_value(fit.x, fit.cov) if opts.model == "auto" else 0.0
+    model_doubt = None
     if p_value >= opts.significance:
         setup.progress("refining", 0.66)
         spin = refine_dense(
@@ -191,17 +198,20 @@ def _judged(setup: Setup, solve: Solve, n2: int, warnings: list[str]) -> Attempt
             )
         else:
             # The spin-only refit lost what the full one fits (seen: every frame unmatched, which
-            # reported 0 +- 0 deg/s with a passed check): keep the model that fits the points.
-            warnings.append(
+            # reported 0 +- 0 deg/s with a passed check): keep the model that fits the points, and
+            # let another start try to pin the precession down.
+            doubt = (
                 f"no significant precession (Wald test p={p_value:.3g}), but the spin-only refit does not fit "
-                f"the frames ({spin_poor}): reporting the spin-precession model"
+                f"the frames ({spin_poor})"
             )
+            warnings.append(doubt + ": reporting the spin-precession model")
+            model_doubt = doubt
     # 5. Validate: do the first n2 frames alone support the motion?
     check = None
     if n2 < setup.data.n_frames:
         setup.progress("validating", 0.7)
         check = _validate(setup, n2, fit)
-    return Attempt(solve, fit, check, warnings)
+    return Attempt(solve, fit, check, warnings, model_doubt)
 
 
 def _solve(setup: Setup, pairs: PairTransforms, start: Start, warnings: list[str], *, path: str) -> Solve:
