@@ -97,18 +97,25 @@ def capture(name: str, distance_m: float, seed: int, size: int, variant: str = "
     refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish_rec, sandwich_rec, patches_rec  # type: ignore[assignment]
     if variant == "oracle-one-face":
         refine_mod.build_surfels = _one_face_only(build, scene, motion, sim)
+    rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
+    if variant == "no-edge-rules":
+        surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
+        surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
+        surfels_mod.KEEP_EDGE_POINTS_OUT = False
     try:
         result = estimate_from_frames(frames)
     finally:
         refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish, sandwich, patches
         refine_mod.build_surfels = build
+        surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
     e = errors(result, motion)
     # The call whose covariance the result reports (the validation's subset fit is another).
     reported = np.radians(result.uncertainty.spin_rate_deg_s)
     call = min(calls, key=lambda k: abs(np.sqrt(k["cov"][k["free"].index(2), k["free"].index(2)]) - reported))
     bound = against_bound(motion, scene, sim, result.reference_time_s, e)["bound"]
     return {"shape": name, "distance_m": distance_m, "seed": seed, "errors": e, "bound": bound, "fit": call,
-            "warnings": result.warnings}  # fmt: skip
+            "warnings": result.warnings,
+            "points_share": (result.fit.points_used or 0) / result.fit.observations}  # fmt: skip
 
 
 # --- covariance variants -------------------------------------------------------------------
@@ -354,9 +361,15 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
             surfels_mod.assign_to_faces = lambda *a, _cell=data.cell: _cell
         if variant == "no-curvature":
             surfels_mod.CURVATURE_CORRECTION = False
+        rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
+        if variant == "no-edge-rules":
+            surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
+            surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
+            surfels_mod.KEEP_EDGE_POINTS_OUT = False
         try:
             fit = refine_mod.refine_dense(data, x_true, noise=noise)
         finally:
+            surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
             refine_mod.patches = patches
             surfels_mod.assign_to_faces, surfels_mod.CURVATURE_CORRECTION = handover, curvature
             refine_mod.build_surfels = build
@@ -455,7 +468,8 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--tag", default="before")
     parser.add_argument("--tags", nargs="+", default=["before", "after"], help="compare: the captures' tags")
-    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside", "erode", "erode-border"]
+    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside", "erode", "erode-border",
+                 "no-edge-rules"]  # fmt: skip
     parser.add_argument("--variant", default="", choices=variants_, help="draws, capture, attribute: see each")
     args = parser.parse_args()
     if args.mode == "variants":
