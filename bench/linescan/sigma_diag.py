@@ -41,7 +41,7 @@ from tumblescan.target.motion import N_PARAMS, canonical_params
 
 from ..common import out_dir, table
 from .dense import errors
-from .real_shapes import PARAMS, UNITS, against_bound, shape_named
+from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
 
 
 def _tangent(x: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -309,6 +309,15 @@ def compare(tags: list[str]) -> None:
         rows.append(cells)
     print(table(rows, ["shape", "m", "seed", *tags]))
     print("cells: worst |error|/sigma, its parameter (sa, sr, pa, pr) / median sigma over bound")
+
+    def within(c: dict[str, Any]) -> bool:
+        e, b = c["errors"], c["bound"]
+        return all(not e[f"{p}_{UNITS[p]}"] > max(FLOOR[UNITS[p]], 3 * b[f"{p}_{UNITS[p]}"]) for p in PARAMS)
+
+    def points(cs: list[dict[str, Any]]) -> str:
+        shares = [c["points_share"] for c in cs if "points_share" in c]
+        return f"{100 * min(shares):.1f}" if len(shares) == len(cs) else "-"
+
     groups = sorted({(k[0], k[1]) for k in keys})
     rows = []
     for g in groups:
@@ -316,11 +325,13 @@ def compare(tags: list[str]) -> None:
         cells = [g[0], f"{g[1]:g}", len(ks)]
         for t in tags:
             ws = [worst(runs[t][k])[0] for k in ks]
-            cells.append(
-                f"{sum(w > 3 for w in ws)} / max {max(ws):.2f} / {np.median([sb(runs[t][k]) for k in ks]):.2f}"
-            )
+            inside = sum(within(runs[t][k]) for k in ks)
+            median_sb = np.median([sb(runs[t][k]) for k in ks])
+            least = points([runs[t][k] for k in ks])
+            cells.append(f"{sum(w > 3 for w in ws)} / max {max(ws):.2f} / {median_sb:.2f} / {inside} / {least}")
         rows.append(cells)
-    print(table(rows, ["shape", "m", "cases", *[f"{t}: over 3 / max / sigma:bound" for t in tags]]))
+    print(table(rows, ["shape", "m", "cases", *[f"{t}: over 3 / max / sigma:bound / within / points %" for t in tags]]))
+    print("within: cases with every error within max(0.01 deg/s or 0.02 deg, 3 x bound); points: the least share used")
 
 
 # --- noise draws from the truth -----------------------------------------------------------

@@ -144,7 +144,8 @@ def rules(paths: list[Path]) -> None:
         straddler, kept = planar & ~good, planar & good
         n_points = len(c["point_cell"])
         found = {
-            "band": ~faces_mod.clear_of_other_faces(planes, planar, c["flat"] & c["interior"]),
+            "band, flat others": ~faces_mod.clear_of_other_faces(planes, planar, c["flat"] & c["interior"]),
+            "band": ~faces_mod.clear_of_other_faces(planes, planar, planar),
             "outline": ~faces_mod.clear_of_outlines(c["neighbours"], planes.count, c["interior"], planar),
         }
         found["band + outline"] = found["band"] | found["outline"]

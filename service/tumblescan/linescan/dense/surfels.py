@@ -50,7 +50,7 @@ SHARED_RADIUS = 1.5
 MIN_COS_INCIDENCE = 0.15
 NOISE_COV_PASSES = 2
 SHARED_MAX_ANGLE = np.radians(30.0)
-# The points of the cells the edge rules leave out are not handed to other cells (build_surfels).
+# The points of the cells left out beside an outline are not handed to other cells (build_surfels).
 KEEP_EDGE_POINTS_OUT = True
 CURVATURE_CORRECTION = True  # anchors on the surface, not at the centroids (curvature.py)
 
@@ -380,12 +380,14 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
     # The cells that may hold a few points of another face, within the noise of their plane.
-    admitted = planar
-    planar = clear_of_outlines(data.neighbours, count, data.interior, clear_of_other_faces(planes, planar, planar))
-    # Nor are their points handed over (unless KEEP_EDGE_POINTS_OUT is off): the other face's
-    # among them lie on this face's plane too, and joined the neighbours' surfels instead (on the
-    # truss at 100 m three times the points were handed over, and half the strays came back).
-    givers = data.interior & ~admitted if KEEP_EDGE_POINTS_OUT else data.interior & ~planar
+    planar = clear_of_other_faces(planes, planar, planar)
+    outline = planar & ~clear_of_outlines(data.neighbours, count, data.interior, planar)
+    planar &= ~outline
+    # Nor are the points of the cells beside an outline handed over (unless KEEP_EDGE_POINTS_OUT
+    # is off): the other face's among them lie on this face's plane too, and no neighbour's plane
+    # tells them apart, so they joined the neighbours' surfels instead. The band along an edge
+    # between two faces' planes is assign_to_faces' own to keep out.
+    givers = data.interior & ~planar & ~(outline & KEEP_EDGE_POINTS_OUT)
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face). These are the planes
