@@ -41,7 +41,7 @@ from tumblescan.target.motion import N_PARAMS, canonical_params
 
 from ..common import out_dir, table
 from .dense import errors
-from .real_shapes import PARAMS, UNITS, against_bound, shape_named
+from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
 
 
 def _tangent(x: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -97,18 +97,25 @@ def capture(name: str, distance_m: float, seed: int, size: int, variant: str = "
     refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish_rec, sandwich_rec, patches_rec  # type: ignore[assignment]
     if variant == "oracle-one-face":
         refine_mod.build_surfels = _one_face_only(build, scene, motion, sim)
+    rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
+    if variant == "no-edge-rules":
+        surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
+        surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
+        surfels_mod.KEEP_EDGE_POINTS_OUT = False
     try:
         result = estimate_from_frames(frames)
     finally:
         refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish, sandwich, patches
         refine_mod.build_surfels = build
+        surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
     e = errors(result, motion)
     # The call whose covariance the result reports (the validation's subset fit is another).
     reported = np.radians(result.uncertainty.spin_rate_deg_s)
     call = min(calls, key=lambda k: abs(np.sqrt(k["cov"][k["free"].index(2), k["free"].index(2)]) - reported))
     bound = against_bound(motion, scene, sim, result.reference_time_s, e)["bound"]
     return {"shape": name, "distance_m": distance_m, "seed": seed, "errors": e, "bound": bound, "fit": call,
-            "warnings": result.warnings}  # fmt: skip
+            "warnings": result.warnings,
+            "points_share": (result.fit.points_used or 0) / result.fit.observations}  # fmt: skip
 
 
 # --- covariance variants -------------------------------------------------------------------
@@ -302,6 +309,15 @@ def compare(tags: list[str]) -> None:
         rows.append(cells)
     print(table(rows, ["shape", "m", "seed", *tags]))
     print("cells: worst |error|/sigma, its parameter (sa, sr, pa, pr) / median sigma over bound")
+
+    def within(c: dict[str, Any]) -> bool:
+        e, b = c["errors"], c["bound"]
+        return all(not e[f"{p}_{UNITS[p]}"] > max(FLOOR[UNITS[p]], 3 * b[f"{p}_{UNITS[p]}"]) for p in PARAMS)
+
+    def points(cs: list[dict[str, Any]]) -> str:
+        shares = [c["points_share"] for c in cs if "points_share" in c]
+        return f"{100 * min(shares):.1f}" if len(shares) == len(cs) else "-"
+
     groups = sorted({(k[0], k[1]) for k in keys})
     rows = []
     for g in groups:
@@ -309,11 +325,13 @@ def compare(tags: list[str]) -> None:
         cells = [g[0], f"{g[1]:g}", len(ks)]
         for t in tags:
             ws = [worst(runs[t][k])[0] for k in ks]
-            cells.append(
-                f"{sum(w > 3 for w in ws)} / max {max(ws):.2f} / {np.median([sb(runs[t][k]) for k in ks]):.2f}"
-            )
+            inside = sum(within(runs[t][k]) for k in ks)
+            median_sb = np.median([sb(runs[t][k]) for k in ks])
+            least = points([runs[t][k] for k in ks])
+            cells.append(f"{sum(w > 3 for w in ws)} / max {max(ws):.2f} / {median_sb:.2f} / {inside} / {least}")
         rows.append(cells)
-    print(table(rows, ["shape", "m", "cases", *[f"{t}: over 3 / max / sigma:bound" for t in tags]]))
+    print(table(rows, ["shape", "m", "cases", *[f"{t}: over 3 / max / sigma:bound / within / points %" for t in tags]]))
+    print("within: cases with every error within max(0.01 deg/s or 0.02 deg, 3 x bound); points: the least share used")
 
 
 # --- noise draws from the truth -----------------------------------------------------------
@@ -354,9 +372,15 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
             surfels_mod.assign_to_faces = lambda *a, _cell=data.cell: _cell
         if variant == "no-curvature":
             surfels_mod.CURVATURE_CORRECTION = False
+        rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
+        if variant == "no-edge-rules":
+            surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
+            surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
+            surfels_mod.KEEP_EDGE_POINTS_OUT = False
         try:
             fit = refine_mod.refine_dense(data, x_true, noise=noise)
         finally:
+            surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
             refine_mod.patches = patches
             surfels_mod.assign_to_faces, surfels_mod.CURVATURE_CORRECTION = handover, curvature
             refine_mod.build_surfels = build
@@ -455,7 +479,8 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--tag", default="before")
     parser.add_argument("--tags", nargs="+", default=["before", "after"], help="compare: the captures' tags")
-    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside", "erode", "erode-border"]
+    variants_ = ["", "no-handover", "no-curvature", "oracle-one-face", "no-beside", "erode", "erode-border",
+                 "no-edge-rules"]  # fmt: skip
     parser.add_argument("--variant", default="", choices=variants_, help="draws, capture, attribute: see each")
     args = parser.parse_args()
     if args.mode == "variants":

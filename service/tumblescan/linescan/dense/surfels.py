@@ -22,7 +22,17 @@ from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 from ..sensor import SensorNoise, azimuth_elevation
 from .curvature import CURVATURE_RADIUS, foot_offset
-from .faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, CellPlanes, assign_to_faces, beside_face, flat_cells, inside_face
+from .faces import (
+    NEIGHBOUR_OFFSETS,
+    SIDE_NEIGHBOURS,
+    CellPlanes,
+    assign_to_faces,
+    beside_face,
+    clear_of_other_faces,
+    clear_of_outlines,
+    flat_cells,
+    inside_face,
+)
 from .returns import range_inliers
 
 STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
@@ -40,6 +50,8 @@ SHARED_RADIUS = 1.5
 MIN_COS_INCIDENCE = 0.15
 NOISE_COV_PASSES = 2
 SHARED_MAX_ANGLE = np.radians(30.0)
+# The points of the cells left out beside an outline are not handed to other cells (build_surfels).
+KEEP_EDGE_POINTS_OUT = True
 CURVATURE_CORRECTION = True  # anchors on the surface, not at the centroids (curvature.py)
 # Points mapped to T per chunk of this many (LineMapping.apply): the gathered rotations stay in cache.
 APPLY_CHUNK = 65536
@@ -438,6 +450,15 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
     planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
+    # The cells that may hold a few points of another face, within the noise of their plane.
+    planar = clear_of_other_faces(planes, planar, planar)
+    outline = planar & ~clear_of_outlines(data.neighbours, count, data.interior, planar)
+    planar &= ~outline
+    # Nor are the points of the cells beside an outline handed over (unless KEEP_EDGE_POINTS_OUT
+    # is off): the other face's among them lie on this face's plane too, and no neighbour's plane
+    # tells them apart, so they joined the neighbours' surfels instead. The band along an edge
+    # between two faces' planes is assign_to_faces' own to keep out.
+    givers = data.interior & ~planar & ~(outline & KEEP_EDGE_POINTS_OUT)
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face). These are the planes
@@ -449,7 +470,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         mean, cov, noise_ref, count, normal_ref, planar, radius_m=SHARED_RADIUS * data.surfel_m
     )
     pooled = replace(planes, normal_ref=pooled_ref, tilt_var_rad2=_tilt_variance(var, pooled_spread))
-    point_cell = assign_to_faces(pooled, data.interior & ~planar, planar)
+    point_cell = assign_to_faces(pooled, givers, planar)
     moved = point_cell != data.cell
     if np.any(moved):
         # The cells that gained or lost points: their moments, line and normal again.
