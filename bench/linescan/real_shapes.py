@@ -17,8 +17,9 @@ sigma over the bound (1 for an efficient estimate), and the share of cases
 with every parameter within ``max(floor, 3 x bound)`` (floor 0.01 deg/s and 0.02 deg, the
 box's goal), and the share within the fixed limits that an efficient estimator would expect on
 these motions: one modelling the target as planes, and one given the exact shape (only its pose
-unknown: no estimator does better). A second table states the issue's goals per shape. Then each case outside that: the misses that are the estimator's, not the
-data's. Writes ``bench/out/real_shapes.json`` and a plot of error over sigma (``--stem``
+unknown: no estimator using the hits on the surfaces does better). A second table states the
+issue's goals per shape. Then each case outside ``max(floor, 3 x bound)``: the misses that are
+the estimator's, not the data's. Writes ``bench/out/real_shapes.json`` and a plot of error over sigma (``--stem``
 renames them, for runs split by shapes across processes; ``--report`` merges their JSON, and
 with ``--rebound`` computes the saved cases' bound anew on the same seeded frames).
 The Hubble mesh is read from ``../shared/meshes`` and skipped, saying why, when absent.
