@@ -17,18 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, random_motion, simulate_frames
+from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import cauchy_curvature, patches, sandwich
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.matching import CAUCHY_C, weights
 from tumblescan.linescan.dense.refine import refine_dense
-from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import LineMapping, build_surfels
 from tumblescan.target import shapes as shapes_mod
 
 from ..common import table
 from .dense_bound import _body_frame, dense_bound, face_of_hits, last_stage_matches, motion_sigmas_deg
 from .real_shapes import shape_named
+from .truth import frames_at_truth
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
 UNIT = ("deg", "deg_s", "deg", "deg_s")
@@ -95,16 +94,8 @@ def case(name: str, distance_m: float, seed: int, size: int, parts: bool) -> Non
 
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    sim = simulate_frames(motion, scene, seed=seed)
-    frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    noise = scene.scanner.noise
-    data = prepare(
-        sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION, range_sigma_m=noise.range_sigma_m
-    )
-    x_true = motion.at_reference(T).params()
-    mapping = LineMapping(x_true, data.tau_s, tuple(range(9)))
+    sim, data, mapping = frames_at_truth(motion, scene, seed)
+    T, x_true, noise = float(sim.t_s.min()), mapping.x, scene.scanner.noise
     surf = build_surfels(data, mapping, noise)
     kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
     used = np.zeros(len(sim.xyz_m), dtype=bool)

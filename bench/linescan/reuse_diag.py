@@ -24,12 +24,10 @@ import argparse
 
 import numpy as np
 
-from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
+from tumblescan import Motion, Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import patches, sandwich
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
-from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels
 from tumblescan.linescan.sensor import SensorNoise
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import canonical_cov
@@ -37,6 +35,7 @@ from tumblescan.linescan.validation import canonical_cov
 from ..common import table
 from .dense_bound import dense_bound, face_of_hits, last_stage_matches, motion_sigmas_deg
 from .real_shapes import shape_named
+from .truth import frames_at_truth
 
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
 UNIT = ("deg", "deg_s", "deg", "deg_s")
@@ -130,15 +129,8 @@ def designs(
 
 
 def at_truth(motion: Motion, scene: Scene, noise_seed: int) -> tuple[FrameCloud, DenseData, LineMapping, Surfels]:
-    """Frames of ``motion`` (noise drawn with ``noise_seed``), reference time their first point's,
-    and the surfels built at the true motion as the estimator builds them."""
-    sim = simulate_frames(motion, scene, seed=noise_seed)
-    frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=scene.scanner.noise.range_sigma_m)  # fmt: skip
-    mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
+    """:func:`truth.frames_at_truth` and the surfels built at the true motion as the estimator builds them."""
+    sim, data, mapping = frames_at_truth(motion, scene, noise_seed)
     return sim, data, mapping, build_surfels(data, mapping, scene.scanner.noise)
 
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import argparse
 import pickle
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,7 @@ from tumblescan.target.motion import N_PARAMS, canonical_params
 from ..common import out_dir, table
 from .dense import errors
 from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
+from .truth import frames_at_truth
 
 
 def _tangent(x: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -56,15 +58,23 @@ def sigmas(x_raw: np.ndarray, cov_free: np.ndarray, free: tuple[int, ...]) -> di
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(free)
     cov9[np.ix_(idx, idx)] = cov_free
-    x = canonical_params(x_raw)
-    cov = canonical_cov(x_raw, cov9)
-    out = {}
-    for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
-        Jl = _tangent(x, a, b)
-        out[p] = float(np.degrees(np.sqrt(max(np.trace(Jl @ cov[np.ix_([a, b], [a, b])] @ Jl.T), 0.0))))
-    out["spin_rate"] = float(np.degrees(np.sqrt(cov[2, 2])))
-    out["precession_rate"] = float(np.degrees(np.sqrt(cov[5, 5])))
-    return out
+    return _sig_canonical(canonical_params(x_raw), canonical_cov(x_raw, cov9))
+
+
+@contextmanager
+def edge_rules(variant: str) -> Iterator[None]:
+    """The surfel build without its edge rules inside the block when ``variant`` is
+    ``no-edge-rules`` (``faces.clear_of_other_faces``, ``clear_of_outlines``, the outline cells'
+    points kept out); restored after."""
+    rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
+    if variant == "no-edge-rules":
+        surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
+        surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
+        surfels_mod.KEEP_EDGE_POINTS_OUT = False
+    try:
+        yield
+    finally:
+        surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
 
 
 # --- capture -------------------------------------------------------------------------------
@@ -97,17 +107,12 @@ def capture(name: str, distance_m: float, seed: int, size: int, variant: str = "
     refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish_rec, sandwich_rec, patches_rec  # type: ignore[assignment]
     if variant == "oracle-one-face":
         refine_mod.build_surfels = _one_face_only(build, scene, motion, sim)
-    rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
-    if variant == "no-edge-rules":
-        surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
-        surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
-        surfels_mod.KEEP_EDGE_POINTS_OUT = False
     try:
-        result = estimate_from_frames(frames)
+        with edge_rules(variant):
+            result = estimate_from_frames(frames)
     finally:
         refine_mod._finish, refine_mod.sandwich, refine_mod.patches = finish, sandwich, patches
         refine_mod.build_surfels = build
-        surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
     e = errors(result, motion)
     # The call whose covariance the result reports (the validation's subset fit is another).
     reported = np.radians(result.uncertainty.spin_rate_deg_s)
@@ -372,15 +377,10 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
             surfels_mod.assign_to_faces = lambda *a, _cell=data.cell: _cell
         if variant == "no-curvature":
             surfels_mod.CURVATURE_CORRECTION = False
-        rules = surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT
-        if variant == "no-edge-rules":
-            surfels_mod.clear_of_other_faces = lambda planes, cells, other: cells
-            surfels_mod.clear_of_outlines = lambda neighbours, count, interior, cells: cells
-            surfels_mod.KEEP_EDGE_POINTS_OUT = False
         try:
-            fit = refine_mod.refine_dense(data, x_true, noise=noise)
+            with edge_rules(variant):
+                fit = refine_mod.refine_dense(data, x_true, noise=noise)
         finally:
-            surfels_mod.clear_of_other_faces, surfels_mod.clear_of_outlines, surfels_mod.KEEP_EDGE_POINTS_OUT = rules
             refine_mod.patches = patches
             surfels_mod.assign_to_faces, surfels_mod.CURVATURE_CORRECTION = handover, curvature
             refine_mod.build_surfels = build
@@ -520,15 +520,8 @@ def attribute(name: str, distance_m: float, seed: int, size: int, noisy: bool, v
 
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name), noise=noisy)
-    sim = simulate_frames(motion, scene, seed=seed)
-    frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    noise = scene.scanner.noise
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
-    x_true = motion.at_reference(T).params()
-    mapping = refine_mod.LineMapping(x_true, data.tau_s, tuple(range(N_PARAMS)))
+    sim, data, mapping = frames_at_truth(motion, scene, seed)
+    x_true, noise = mapping.x, scene.scanner.noise
     beside = surfels_mod.beside_face
     if variant == "no-beside":
         surfels_mod.beside_face = lambda planes, candidate, face: np.zeros_like(candidate)

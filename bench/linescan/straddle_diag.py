@@ -20,32 +20,21 @@ from typing import Any
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, random_motion, simulate_frames
+from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense import faces as faces_mod
-from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
-from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import prepare
-from tumblescan.target.motion import N_PARAMS
 
 from ..common import out_dir, table
 from .dense_bound import face_of_hits
 from .real_shapes import shape_named
+from .truth import frames_at_truth
 
 
 def capture(name: str, distance_m: float, seed: int, size: int, rules_off: bool = False) -> dict[str, Any]:
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    sim = simulate_frames(motion, scene, seed=seed)
-    frame = sim.frame.astype(np.int64)
-    T = float(sim.t_s.min())
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
+    sim, data, mapping = frames_at_truth(motion, scene, seed)
     noise = scene.scanner.noise
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
-    x_true = motion.at_reference(T).params()
-    mapping = refine_mod.LineMapping(x_true, data.tau_s, tuple(range(N_PARAMS)))
     rec: dict[str, Any] = {}
     inside, beside = surfels_mod.inside_face, surfels_mod.beside_face
 

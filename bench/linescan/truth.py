@@ -1,0 +1,25 @@
+"""The dense data of seeded frames at the true motion, as the estimator prepares them: shared by
+the diagnostic benches that look at surfels and residuals at the truth."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tumblescan import Motion, Scene, simulate_frames
+from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.registration import extent_m
+from tumblescan.linescan.dense.surfels import DenseData, LineMapping, prepare
+from tumblescan.linescan.simulate import FrameCloud
+
+
+def frames_at_truth(motion: Motion, scene: Scene, noise_seed: int) -> tuple[FrameCloud, DenseData, LineMapping]:
+    """Frames of ``motion`` (noise drawn with ``noise_seed``), their dense data (reference time
+    ``T`` the first point's, surfel size the estimator's) and the true motion's line mapping
+    (``mapping.x``: the truth at ``T``, all 9 parameters free)."""
+    sim = simulate_frames(motion, scene, seed=noise_seed)
+    frame = sim.frame.astype(np.int64)
+    T = float(sim.t_s.min())
+    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+                   range_sigma_m=scene.scanner.noise.range_sigma_m)  # fmt: skip
+    return sim, data, LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
