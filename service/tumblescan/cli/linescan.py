@@ -256,6 +256,8 @@ def load_result(path: Path) -> MotionResult:
 
 def format_result(r: MotionResult) -> str:
     """A short human-readable summary with 1-sigma values."""
+    from ..report.html import sigmas_text
+
     u = r.uncertainty
     lines = [
         f"model            {r.model}   (reference time {r.reference_time_s:.6g} s)",
@@ -269,7 +271,7 @@ def format_result(r: MotionResult) -> str:
             f"nutation angle   {r.nutation_angle_deg:.4f} deg",
         ]
     lines += [
-        f"centre           {_vec(r.precession.center_m)} m  +- {_sigmas_mm(u.center_m)} mm",
+        f"centre           {_vec(r.precession.center_m)} m  +- {sigmas_text(u.center_m, 1000)} mm",
         _fit_line(r),
         f"validation       {'passed' if r.validation.passed else 'FAILED'} "
         f"({r.validation.test}, frames {r.validation.frames})",
@@ -293,12 +295,6 @@ def _fit_line(r: MotionResult) -> str:
         f"fit              rms {f.rms_residual_m:.3g} m over {f.observations} observations, "
         f"{f.tracks} tracks, {f.frames} frames, {f.outliers} outliers"
     )
-
-
-def _sigmas_mm(v_m: Any) -> str:
-    """Sigmas in millimetres with 2 significant digits: a dense fit pins the centre below a
-    millimetre, which 3 decimals of metres printed as 0.000."""
-    return "[" + ", ".join(f"{1000 * x:.2g}" for x in v_m) + "]"
 
 
 def _vec(v: Any, digits: int = 6) -> str:

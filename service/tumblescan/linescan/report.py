@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from ..geometry.rotations import tangent_basis
 from ..io.ply import TimedCloud
-from ..report import figure_html, page, value_text
+from ..report import figure_html, page, sigmas_text, value_text
 from ..target.motion import Motion
 from .rectify import rectify
 from .result import MotionResult
@@ -102,7 +102,7 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
             "centre (m)",
             "precession.center_m",
             r.precession.center_m,
-            "[" + ", ".join(f"{1000 * x:.2g}" for x in u.center_m) + "] mm",  # sub-mm: 4 decimals of m showed 0
+            sigmas_text(u.center_m, 1000) + " mm",
             t and t.center_m,
             "center_m",
         )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..report.html import sigmas_text
 from ..target.motion import Motion
 from .result import MotionResult
 from .truth import errors_against
@@ -56,7 +57,7 @@ def comparison_table(result: MotionResult, truth: Motion) -> str:
         (
             "centre (m)",
             _v(result.precession.center_m, 3),
-            "[" + ", ".join(f"{x:.2g}" for x in u.center_m) + "]",
+            sigmas_text(u.center_m),
             _v(truth.center_m, 3),
             f"{err['center_m']:.2e} m",
         )

@@ -63,6 +63,12 @@ def value_text(v: Any, digits: int = 6) -> str:
     return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
 
 
+def sigmas_text(v: Iterable[float], scale: float = 1.0) -> str:
+    """Sigmas ``v`` times ``scale`` with 2 significant digits (``[5.7e-05, 0.00014]``): fixed
+    decimals print a sub-millimetre sigma of a dense fit's centre as 0.000."""
+    return "[" + ", ".join(f"{scale * x:.2g}" for x in v) + "]"
+
+
 def table_html(header: Sequence[str], rows: Iterable[Sequence[Any]], *, css_class: str = "") -> str:
     """A plain table; cells are escaped text (pass pre-formatted strings for numbers)."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)

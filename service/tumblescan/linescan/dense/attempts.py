@@ -93,9 +93,8 @@ class Attempt:
         poor = poor_fit(self.fit)
         if poor is not None:
             return poor
-        unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
-        if unmatched > len(self.fit.frame_rms_m) // 2:
-            return f"{unmatched} of {len(self.fit.frame_rms_m)} frames matched no surface in another"
+        if self.unmatched > len(self.fit.frame_rms_m) // 2:
+            return f"{self.unmatched} of {len(self.fit.frame_rms_m)} frames matched no surface in another"
         if self.model_doubt is not None:
             return self.model_doubt
         if self.check is not None and not self.check.passed:
@@ -106,8 +105,12 @@ class Attempt:
         """Order of preference: a fit that is not poor, a model choice without doubt, a check
         that passed, fewer unmatched frames, smaller residuals."""
         failed = self.check is not None and not self.check.passed
-        unmatched = int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
-        return (poor_fit(self.fit) is not None, self.model_doubt is not None, failed, unmatched, self.fit.scale)
+        return (poor_fit(self.fit) is not None, self.model_doubt is not None, failed, self.unmatched, self.fit.scale)
+
+    @property
+    def unmatched(self) -> int:
+        """Frames with no surface matched in another (an edge-on view, or a wrong motion)."""
+        return int(np.sum(~np.isfinite(self.fit.frame_rms_m)))
 
 
 def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[Attempt, list[str], int]:

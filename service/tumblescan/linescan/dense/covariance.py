@@ -93,14 +93,15 @@ def sandwich(
     if gauge_row is not None:
         # The centre's slide along the spin axis is fixed: no variance there.
         penalty = np.outer(gauge_row, gauge_row) * GAUGE_STIFFNESS * np.trace(A)
+    # The sandwich of independent residuals: the answer for one patch (nothing to leave out),
+    # and the floor's reference otherwise.
+    Ainv = np.linalg.pinv(A + penalty, rcond=1e-12)
+    independent = np.asarray(Ainv @ (score.T @ score) @ Ainv, dtype=float)
     if n_clusters < 2:
-        # One patch: nothing to leave out; the sandwich of independent residuals.
-        Ainv = np.linalg.pinv(A + penalty, rcond=1e-12)
-        return np.asarray(Ainv @ (score.T @ score) @ Ainv, dtype=float)
+        return independent
     D = np.stack([np.linalg.pinv(A - A_c[k] + penalty, rcond=1e-12) @ G[k] for k in range(n_clusters)])
     jackknife = np.asarray(D.T @ D * (n_clusters - 1) / n_clusters, dtype=float)
-    Ainv = np.linalg.pinv(A + penalty, rcond=1e-12)
-    return pooled_design_floor(jackknife, Ainv @ (score.T @ score) @ Ainv)
+    return pooled_design_floor(jackknife, independent)
 
 
 def pooled_design_floor(clustered: FloatArray, independent: FloatArray) -> FloatArray:

@@ -150,9 +150,7 @@ def beside_face(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[
     went from 55 to 70 % on the truss and 52 to 67 % on Hubble; on the box the accepted cells
     holding any point of another face went from 0.25 to 2.8 % (100 m; 1.9 % at 50 m), with 0.3 %
     of their points on another face, within the sigmas above of the plane."""
-    neighbours, cell, mapped_m, mean_m = planes.neighbours, planes.cell, planes.mapped_m, planes.mean_m
-    normal_ref, var_m2, tilt_var_rad2, count = planes.normal_ref, planes.var_m2, planes.tilt_var_rad2, planes.count
-    nb = neighbours
+    nb, cell, normal_ref, tilt_var_rad2 = planes.neighbours, planes.cell, planes.normal_ref, planes.tilt_var_rad2
     safe = np.where(nb >= 0, nb, 0)
     rows = np.arange(len(nb))
     cos = np.abs(np.einsum("ni,nki->nk", normal_ref, normal_ref[safe]))
@@ -163,14 +161,23 @@ def beside_face(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[
     ok = candidate & agree[rows, best] & (agree.sum(axis=1) >= BESIDE_MIN_NEIGHBOURS)
     pts = np.flatnonzero(ok[cell])
     c = cell[pts]
-    k = k_of[c]
-    offset = mapped_m[pts] - mean_m[k]
-    d = np.einsum("ni,ni->n", normal_ref[k], offset)
-    in_plane2 = np.einsum("ni,ni->n", offset, offset) - d**2
-    z2 = d**2 / (var_m2[c] + var_m2[k] / count[k] + tilt_var_rad2[k] * in_plane2)
+    z2 = _z2_to_plane(planes, pts, k_of[c])
     worst = np.zeros(len(nb))
     np.maximum.at(worst, c, z2)
     return np.asarray(ok & (worst <= BESIDE_MAX_SIGMAS**2))
+
+
+def _z2_to_plane(planes: CellPlanes, pts: IntArray, k: IntArray) -> FloatArray:
+    """Squared offset of each point ``pts`` from the plane of cell ``k`` (one per point), in
+    sigmas: the point's noise along the normal (its own cell's ``var_m2``) plus the plane's, its
+    centroid's and its normal's tilt over the in-plane offset."""
+    c = planes.cell[pts]
+    offset = planes.mapped_m[pts] - planes.mean_m[k]
+    d = np.einsum("ni,ni->n", planes.normal_ref[k], offset)
+    in_plane2 = np.einsum("ni,ni->n", offset, offset) - d**2
+    return np.asarray(
+        d**2 / (planes.var_m2[c] + planes.var_m2[k] / planes.count[k] + planes.tilt_var_rad2[k] * in_plane2)
+    )
 
 
 def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -191,8 +198,8 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     across an edge, half on either face, may be flat with its plane halfway between theirs, and
     taking it as another face left out the cells beside every edge of the folded wall (72 -> 61 %
     of its points)."""
-    neighbours, cell, mapped_m, mean_m = planes.neighbours, planes.cell, planes.mapped_m, planes.mean_m
-    normal_ref, var_m2, tilt_var_rad2, count = planes.normal_ref, planes.var_m2, planes.tilt_var_rad2, planes.count
+    neighbours, cell = planes.neighbours, planes.cell
+    normal_ref, tilt_var_rad2 = planes.normal_ref, planes.tilt_var_rad2
     safe = np.where(neighbours >= 0, neighbours, 0)
     cos = np.abs(np.einsum("ni,nki->nk", normal_ref, normal_ref[safe]))
     tolerance = _tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe])
@@ -201,12 +208,7 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     for j in range(neighbours.shape[1]):
         pts = np.flatnonzero(apart[cell, j])
         c = cell[pts]
-        k = safe[c, j]
-        offset = mapped_m[pts] - mean_m[k]
-        d = np.einsum("ni,ni->n", normal_ref[k], offset)
-        in_plane2 = np.einsum("ni,ni->n", offset, offset) - d**2
-        z2 = d**2 / (var_m2[c] + var_m2[k] / count[k] + tilt_var_rad2[k] * in_plane2)
-        near[c[z2 <= BESIDE_MAX_SIGMAS**2]] = True
+        near[c[_z2_to_plane(planes, pts, safe[c, j]) <= BESIDE_MAX_SIGMAS**2]] = True
     return np.asarray(cells & ~near)
 
 
