@@ -34,6 +34,7 @@ triangle, so that no near-singular face block enters the Schur complement.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict, Unpack
 
 import numpy as np
 from numpy.typing import NDArray
@@ -200,26 +201,31 @@ class BoundCovariances:
     faces: int
 
 
+class BoundInputs(TypedDict, total=False):
+    """The optional inputs of :func:`bound_covariances` (see there)."""
+
+    hits: NDArray[np.bool_] | None
+    faces: tuple[IntArray, FloatArray] | None
+    extra_information: FloatArray | None
+
+
 def dense_bound(
-    motion: Motion,
-    scene: Scene,
-    sim: FrameCloud,
-    reference_time_s: float,
-    *,
-    hits: NDArray[np.bool_] | None = None,
-    faces: tuple[IntArray, FloatArray] | None = None,
-    extra_information: FloatArray | None = None,
+    motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float, **inputs: Unpack[BoundInputs]
 ) -> dict[str, float]:
     """1-sigma bounds at the truth (the noise-free hits, or only ``hits``), in the result's units,
     of an estimator that models the target as planes (see :func:`bound_covariances`)."""
-    b = bound_covariances(motion, scene, sim, reference_time_s, hits=hits, faces=faces,
-                          extra_information=extra_information)  # fmt: skip
+    b = bound_covariances(motion, scene, sim, reference_time_s, **inputs)
     return {
-        **{f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(b.x, b.facets).items()},
+        **bound_sigmas(b.x, b.facets),
         "center_m": float(np.sqrt(np.trace(b.facets[6:9, 6:9]))),
         "points": b.points,
         "faces": b.faces,
     }
+
+
+def bound_sigmas(x: FloatArray, cov: FloatArray) -> dict[str, float]:
+    """:func:`motion_sigmas_deg` keyed with the result's units (``spin_axis_deg``, ``spin_rate_deg_s``, ...)."""
+    return {f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in motion_sigmas_deg(x, cov).items()}
 
 
 def bound_covariances(

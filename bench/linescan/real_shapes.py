@@ -47,7 +47,7 @@ from tumblescan.target.shapes import PARAMETRIC, MeshFileShape
 
 from ..common import machine, out_dir, table
 from .dense import errors
-from .dense_bound import bound_covariances, motion_sigmas_deg, share_within
+from .dense_bound import bound_covariances, bound_sigmas, share_within
 
 HUBBLE = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "hubble_illidroid.glb"
 PARAMS = ("spin_axis", "spin_rate", "precession_axis", "precession_rate")
@@ -136,8 +136,7 @@ def against_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_
     """The case's fields of the bound: the bound, whether 3x it exceeds a limit, the thresholds
     max(floor, 3 x bound) per parameter and whether every error ``e`` is within them."""
     b = bound_covariances(motion, scene, sim, reference_time_s)
-    sigmas = motion_sigmas_deg(b.x, b.facets)
-    bound = {f"{k}_deg_s" if k.endswith("rate") else f"{k}_deg": v for k, v in sigmas.items()}
+    bound = bound_sigmas(b.x, b.facets)
     # What an efficient estimator would score against the fixed limits: modelling the target as
     # planes, and given the exact shape (then only its pose at T unknown).
     for key, cov in (("efficient_within_limits", b.facets), ("known_shape_within_limits", b.known_shape)):
