@@ -18,10 +18,12 @@ with every parameter within ``max(floor, 3 x bound)`` (floor 0.01 deg/s and 0.02
 box's goal), and the share within the fixed limits that an efficient estimator would expect on
 these motions: one modelling the target as planes, and one given the exact shape (only its pose
 unknown: no estimator using the hits on the surfaces does better). A second table states the
-issue's goals per shape. Then each case outside ``max(floor, 3 x bound)``: the misses that are
-the estimator's, not the data's. Writes ``bench/out/real_shapes.json`` and a plot of error over sigma (``--stem``
-renames them, for runs split by shapes across processes; ``--report`` merges their JSON, and
-with ``--rebound`` computes the saved cases' bound anew on the same seeded frames).
+issue's goals per shape, beside the RMS of the errors over the reported sigmas (about 1 when
+they are honest) and over the bound (what the estimator achieves). Then each case outside
+``max(floor, 3 x bound)``: the misses that are the estimator's, not the data's. Writes
+``bench/out/real_shapes.json`` and a plot of error over sigma (``--stem`` renames them, for
+runs split by shapes across processes; ``--report`` merges their JSON, and with ``--rebound``
+computes the saved cases' bound anew on the same seeded frames).
 The Hubble mesh is read from ``../shared/meshes`` and skipped, saying why, when absent.
 """
 
@@ -206,9 +208,23 @@ def per_shape(cases: list[Case]) -> list[list[object]]:
             efficient_share(mine),
             sum(not c.within_limits and not c.flagged for c in mine),
             f"{100 * np.mean([c.worst_sigma > 3 for c in mine]):.1f} %",
+            f"{rms_ratio(mine, 'sigma'):.2f}",
+            f"{rms_ratio(mine, 'bound'):.2f}",
             f"{max(c.seconds for c in mine):.1f}",
         ])  # fmt: skip
     return rows
+
+
+def rms_ratio(cases: list[Case], over: str) -> float:
+    """The RMS over the cases and the four parameters of the error over its reported sigma
+    (``over="sigma"``: about 1 when the sigmas are honest, below when cautious) or over its
+    bound (``"bound"``: about 1 for an efficient estimator; what the estimator's errors are)."""
+    ratios = [
+        c.errors[f"{p}_sigma"] if over == "sigma" else c.errors[f"{p}_{UNITS[p]}"] / c.bound[f"{p}_{UNITS[p]}"]
+        for c in cases
+        for p in PARAMS
+    ]
+    return float(np.sqrt(np.nanmean(np.square(ratios))))
 
 
 def sigma_over_bound(c: Case) -> float:
@@ -270,7 +286,8 @@ def report(cases: list[Case], stem: str) -> None:
         "<= 5 % over 3 sigma, <= 20 s):"
     )
     print(table(per_shape(cases), ["shape", "cases", "within limits", "efficient estimator would expect "
-                                   "(planes / known shape)", "unflagged misses", "over 3 sigma", "max s"]))  # fmt: skip
+                                   "(planes / known shape)", "unflagged misses", "over 3 sigma",
+                                   "rms error / sigma", "rms error / bound", "max s"]))  # fmt: skip
     beyond = beyond_bound(cases)
     print(
         f"\n{len(beyond)} of {len(cases)} cases outside max(floor, 3x bound); "
