@@ -29,18 +29,18 @@ def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, in
     monkeypatch.setattr(est, "consensus_start", lambda *a: "consensus")
     monkeypatch.setattr(est, "_swarm", lambda *a: "swarm")
 
-    def solve(setup: Any, pairs: Any, start: str, warnings: list[str], *, path: str) -> Any:
+    def solve(setup: Any, pairs: Any, start: str, *, path: str) -> Any:
         made.append(start)
         scale, _, unmatched = outcomes[len(made) - 1]
         rms = np.r_[np.full(unmatched, np.nan), np.full(10 - unmatched, 0.02)]
         # Each start ends at its own motion, tens of degrees from the others'.
         x = np.array([0.3 + 0.5 * len(made), 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0])
-        return est.Solve(FakeFit(scale, rms, x), None, 10, path)  # type: ignore[arg-type]
+        return est.Solve(FakeFit(scale, rms, x), None, 10, 10, path)  # type: ignore[arg-type]
 
-    def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
+    def judged(setup: Any, solve: Any, n2: int) -> Any:
         passed = outcomes[len(made) - 1][1]
         check = Similarity(passed, 1.0 if passed else 9.0, 3.0, "covariance")
-        return est.Attempt(solve, solve.fit, check, warnings)
+        return est.Attempt(solve, solve.fit, check, [])
 
     monkeypatch.setattr(est, "_solve", solve)
     monkeypatch.setattr(est, "_judged", judged)
@@ -98,15 +98,15 @@ def scripted_starts(
         monkeypatch.setattr(est, attr, lambda *a, g=guess: est.Start(guess=g, inliers=np.ones(3, bool)))
     refined: list[np.ndarray] = []
 
-    def solve(setup: Any, pairs: Any, start: Any, warnings: list[str], *, path: str) -> Any:
+    def solve(setup: Any, pairs: Any, start: Any, *, path: str) -> Any:
         name = next(k for k, v in begins.items() if v is start.guess.x)
         fit = FakeFit(scales[len(refined)], np.full(10, 0.02), ends[name])
         refined.append(start.guess.x)
-        return est.Solve(fit, start.guess, 10, path)  # type: ignore[arg-type]
+        return est.Solve(fit, start.guess, 10, 10, path)  # type: ignore[arg-type]
 
-    def judged(setup: Any, solve: Any, n2: int, warnings: list[str]) -> Any:
+    def judged(setup: Any, solve: Any, n2: int) -> Any:
         passed = len(refined) == 2
-        return est.Attempt(solve, solve.fit, Similarity(passed, 1.0, 3.0, "covariance"), warnings)
+        return est.Attempt(solve, solve.fit, Similarity(passed, 1.0, 3.0, "covariance"), [])
 
     monkeypatch.setattr(est, "_solve", solve)
     monkeypatch.setattr(est, "_judged", judged)
@@ -147,7 +147,7 @@ def test_a_second_start_that_ends_where_the_first_failed_ends_the_search(monkeyp
     monkeypatch.setattr(
         est,
         "_judged",
-        lambda s, solve, n2, w: est.Attempt(solve, solve.fit, Similarity(False, 9.0, 3.0, "covariance"), w),
+        lambda s, solve, n2: est.Attempt(solve, solve.fit, Similarity(False, 9.0, 3.0, "covariance"), []),
     )
     _, warnings, attempts = est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert len(refined) == 2 and attempts == 2
@@ -159,11 +159,11 @@ def _unmatched_first(monkeypatch: pytest.MonkeyPatch, starts_unmatched: int) -> 
     made = script(monkeypatch, [(1.0, True, 0)] * 3)
     solve: Any = est._solve  # the scripted one
 
-    def unmatched(setup: Any, pairs: Any, start: str, warnings: list[str], *, path: str) -> Any:
+    def unmatched(setup: Any, pairs: Any, start: str, *, path: str) -> Any:
         if len(made) < starts_unmatched:
             made.append(start)
             raise est.NoSurfacesError("no planar patch of one frame could be matched in another", field="file")
-        return solve(setup, pairs, start, warnings, path=path)
+        return solve(setup, pairs, start, path=path)
 
     monkeypatch.setattr(est, "_solve", unmatched)
     return made
@@ -196,8 +196,8 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     monkeypatch.setattr(est, "refine_dense", lambda *a, **k: lost)
     setup = type("S", (Setup,), {"data": type("D", (), {"n_frames": 10})(), "noise": None})()
     setup.opts = type("O", (), {"seed": 0, "model": "auto", "significance": 0.05, "dense": None})()
-    solve = est.Solve(full, type("G", (), {"x_spin_only": full.x})(), 10, "registration+cone+dense")  # type: ignore[arg-type]
-    attempt = est._judged(setup, solve, 10, [])
+    solve = est.Solve(full, type("G", (), {"x_spin_only": full.x})(), 10, 10, "registration+cone+dense")  # type: ignore[arg-type]
+    attempt = est._judged(setup, solve, 10)
     assert attempt.fit is full
     assert "spin-only refit does not fit the frames (no surface of one frame matched in another)" in attempt.warnings[0]
     # Another start should try to pin the precession down; this one ranks after a sound one.
@@ -208,6 +208,6 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     # A spin-only refit that fits is reported as before.
     fits = FakeFit(1.0, np.full(10, 0.02))
     monkeypatch.setattr(est, "refine_dense", lambda *a, **k: fits)
-    attempt = est._judged(setup, solve, 10, [])
+    attempt = est._judged(setup, solve, 10)
     assert attempt.fit is fits and "reporting the spin-only model" in attempt.warnings[0]
     assert attempt.problem() is None and attempt.flaws() < doubted.flaws()

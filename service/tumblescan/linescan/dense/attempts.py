@@ -69,6 +69,7 @@ class Solve:
     fit: DenseFit
     initial: InitialGuess
     pairs_used: int
+    pairs_total: int
     path: str
 
 
@@ -138,7 +139,6 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
         made += 1
         if tried:
             setup.progress("initializing", 0.05)
-        attempt_warnings: list[str] = []
         try:
             start = begin()
             if best is not None and isinstance(start, Start) and same_basin(start.guess.x, best.fit.x):
@@ -147,7 +147,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
                 tried.append(f"{path}: starts where the motion above ended, not refined again")
                 confirmed = _check_only(best)
                 continue
-            solve = _solve(setup, global_pairs, start, attempt_warnings, path=path)
+            solve = _solve(setup, global_pairs, start, path=path)
         except NoSurfacesError as exc:
             # From a wrong start no patch may land on another frame's: the next start may do.
             unmatched.append(exc)
@@ -156,7 +156,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
         except FramesUnusableError as exc:
             tried.append(f"{path}: {exc}")
             continue
-        attempt = _judged(setup, solve, n2, attempt_warnings)
+        attempt = _judged(setup, solve, n2)
         ended_alike = best is not None and same_basin(attempt.fit.x, best.fit.x)
         confirmed = ended_alike and _check_only(attempt)
         if best is None or attempt.flaws() < best.flaws():
@@ -181,9 +181,10 @@ def _check_only(attempt: Attempt | None) -> bool:
     return attempt is not None and attempt.problem() == CHECK_FAILED
 
 
-def _judged(setup: Setup, solve: Solve, n2: int, warnings: list[str]) -> Attempt:
+def _judged(setup: Setup, solve: Solve, n2: int) -> Attempt:
     """The model choice and the two-frame-count check on one solve."""
     fit, opts = solve.fit, setup.opts
+    warnings: list[str] = []
     # 4. Model choice.
     p_value = precession_p_value(fit.x, fit.cov) if opts.model == "auto" else 0.0
     model_doubt = None
@@ -217,7 +218,7 @@ def _judged(setup: Setup, solve: Solve, n2: int, warnings: list[str]) -> Attempt
     return Attempt(solve, fit, check, warnings, model_doubt)
 
 
-def _solve(setup: Setup, pairs: PairTransforms, start: Start, warnings: list[str], *, path: str) -> Solve:
+def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str) -> Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
@@ -231,12 +232,9 @@ def _solve(setup: Setup, pairs: PairTransforms, start: Start, warnings: list[str
         )
         start = vote(pairs, mid) if start.voted else consensus_start(pairs, mid, opts.seed)
     progress("initializing", 0.1)
+    # Pairs that disagree with the rest (a symmetric target registered onto a turned copy of itself)
+    # are routine and left out of the start; the result's solver path counts them, not a warning.
     used = int(start.inliers.sum())
-    if used < len(start.inliers):
-        warnings.append(
-            f"{len(start.inliers) - used} of {len(start.inliers)} frame pairs registered inconsistently with the "
-            "others (a symmetric target can match a turned copy of itself); the initial motion used the others"
-        )
     guess = start.guess
     progress("refining", 0.15)
 
@@ -259,7 +257,7 @@ def _solve(setup: Setup, pairs: PairTransforms, start: Start, warnings: list[str
             "is the declared range noise right?)",
             field="file",
         )
-    return Solve(fit, guess, used, path)
+    return Solve(fit, guess, used, len(start.inliers), path)
 
 
 def poor_fit(fit: DenseFit) -> str | None:

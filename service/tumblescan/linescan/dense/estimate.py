@@ -188,7 +188,7 @@ def _result(
             },
             "validation": validation_fields(check, frames.n_frames, n2),
             "solver": {
-                "path": f"{main.path} ({main.pairs_used} frame pairs)",
+                "path": f"{main.path} ({main.pairs_used} of {main.pairs_total} frame pairs agreed)",
                 "iterations": fit.iterations,
                 "attempts": attempts,
                 "elapsed_s": elapsed_s,
