@@ -18,45 +18,36 @@ import argparse
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.refine import refine_dense
-from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import prepare
-from tumblescan.linescan.frames import assemble_frames
 from tumblescan.target.motion import canonical_params
 
 from ..common import table
 from .bias_map import in_bounds
-from .dense import errors
-from .real_shapes import PARAMS, UNITS, against_bound, shape_named
+from .real_shapes import PARAMS, UNITS, estimated, shape_named
+from .truth import frames_at_truth
 
 
 def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object]]:
     """Rows ``[case, variant, error / bound per parameter...]`` for one bench case."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    sim = simulate_frames(motion, scene, seed=seed)
-    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
-    result = estimate_from_frames(frames)
-    e = errors(result, motion)
-    bound = against_bound(motion, scene, sim, result.reference_time_s, e)["bound"]
+    # The bench's frames (noise seed = motion seed) and their dense data at T, the first point's
+    # time: the estimate's default reference time, so both are stated at the same T.
+    sim, data, mapping = frames_at_truth(motion, scene, seed)
+    whole = estimated(name, distance_m, seed, motion, scene, sim)
     label = f"{name} {distance_m:g} m seed {seed}"
     rows: list[list[object]] = [
-        [label, "whole estimate", *(f"{e[f'{p}_{UNITS[p]}'] / bound[f'{p}_{UNITS[p]}']:.2f}" for p in PARAMS)]
+        [
+            label,
+            "whole estimate",
+            *(f"{whole.errors[f'{p}_{UNITS[p]}'] / whole.bound[f'{p}_{UNITS[p]}']:.2f}" for p in PARAMS),
+        ]
     ]
-    # The dense data as the estimator prepares it, at the estimate's reference time.
-    T = result.reference_time_s
-    frame = sim.frame.astype(np.int64)
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=scene.scanner.noise.range_sigma_m)  # fmt: skip
-    x_true = motion.at_reference(T).params()
+    x_true = canonical_params(mapping.x)
     for variant, converged in (("last stage from the truth", True), ("all stages from the truth", False)):
-        fit = refine_dense(data, x_true, noise=scene.scanner.noise, converged=converged)
-        x_ref = canonical_params(x_true)
-        ratio = in_bounds(x_ref, fit.x - x_ref, bound)
-        rows.append([label, variant, *(f"{v:.2f}" for v in ratio)])
+        fit = refine_dense(data, mapping.x, noise=scene.scanner.noise, converged=converged)
+        rows.append([label, variant, *(f"{v:.2f}" for v in in_bounds(x_true, fit.x - x_true, whole.bound))])
     return rows
 
 

@@ -36,7 +36,7 @@ import resource
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -94,7 +94,11 @@ def shape_named(name: str) -> Any:
 def one(name: str, distance_m: float, seed: int, size: int) -> Case:
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    sim = simulate_frames(motion, scene, seed=seed)
+    return estimated(name, distance_m, seed, motion, scene, simulate_frames(motion, scene, seed=seed))
+
+
+def estimated(name: str, distance_m: float, seed: int, motion: Motion, scene: Scene, sim: FrameCloud) -> Case:
+    """The whole estimate on the frames ``sim`` of ``motion``, judged against the truth and the bound."""
     frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
     started = time.perf_counter()
     result = estimate_from_frames(frames)
@@ -216,7 +220,7 @@ def per_shape(cases: list[Case]) -> list[list[object]]:
     return rows
 
 
-def rms_ratio(cases: list[Case], over: str) -> float:
+def rms_ratio(cases: list[Case], over: Literal["sigma", "bound"]) -> float:
     """The RMS over the cases and the four parameters of the error over its reported sigma
     (``over="sigma"``: about 1 when the sigmas are honest, below when cautious) or over its
     bound (``"bound"``: about 1 for an efficient estimator; what the estimator's errors are)."""
