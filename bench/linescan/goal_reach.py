@@ -148,13 +148,15 @@ def plot(reaches: list[Reach], path: Path) -> None:
     names = list(dict.fromkeys(r.shape for r in reaches))
     fig, ax = plt.subplots(figsize=(9, 4.5))
     for i, name in enumerate(names):
-        for distance, marker in ((50.0, "o"), (100.0, "s")):
+        for distance, marker, color, side in ((50.0, "o", "tab:blue", -0.2), (100.0, "s", "tab:orange", 0.2)):
             p = np.array([r.planes for r in reaches if r.shape == name and r.distance_m == distance])
             if len(p):
-                jitter = np.random.default_rng(i).uniform(-0.25, 0.25, len(p))
-                ax.scatter(i + jitter, 1 - p, s=12, marker=marker, label=f"{distance:g} m" if i == 0 else None)
+                jitter = np.random.default_rng(i).uniform(-0.15, 0.15, len(p))
+                ax.scatter(i + side + jitter, 1 - p, s=12, marker=marker, color=color,
+                           label=f"{distance:g} m" if i == 0 else None)  # fmt: skip
     ax.axhline(1 - GOAL_SHARE, color="grey", ls="--", lw=1)
     ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set_ylim(0, 1)
     ax.set_xticks(range(len(names)), names)
     ax.set_ylabel("probability an efficient estimate misses the limits")
     ax.set_title("Per motion, at the dense bound (planes); dashed: the goal's 5 %")

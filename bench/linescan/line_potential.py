@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
+from tumblescan.linescan.dense.beams import _moments
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS, flat_cells
 from tumblescan.linescan.dense.registration import extent_m
@@ -99,15 +100,6 @@ def beam_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> IntAr
     valid = tri < len(triangles)
     hit_part = np.where(valid, part[np.where(valid, tri, 0)], -1)
     return np.where((hit_part >= 0) & is_beam[np.maximum(hit_part, 0)], hit_part, -1).astype(np.int64)
-
-
-def _moments(cell: IntArray, y: FloatArray, m: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Per cell: count ``(m,)``, sum ``(m, 3)``, sum of outer products ``(m, 3, 3)``."""
-    count = np.bincount(cell, minlength=m).astype(float)
-    s1 = np.stack([np.bincount(cell, y[:, i], minlength=m) for i in range(3)], axis=1).astype(float)
-    s2 = np.stack([np.stack([np.bincount(cell, y[:, i] * y[:, j], minlength=m) for j in range(3)], axis=1)
-                   for i in range(3)], axis=1).astype(float)  # fmt: skip
-    return count, s1, s2
 
 
 def _is_line(count: FloatArray, s1: FloatArray, s2: FloatArray, los_t: FloatArray, range_var_m2: float,

@@ -34,6 +34,9 @@ class DenseConfig(BaseModel):
     tolerance: float = Field(
         0.1, gt=0, le=1, description="stop a stage when no parameter moves more than this many standard deviations"
     )
+    beams: bool = Field(
+        True, description="fit thin members (booms, truss wires) as lines too, from the second stage on"
+    )
 
 
 class CommonOptions(BaseModel):

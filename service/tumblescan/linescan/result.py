@@ -55,7 +55,10 @@ class FitPublic(_Strict):
     frames: int
     outliers: int = Field(0, description="observations rejected as outliers (counted in observations)")
     source: Literal["tracks", "frames"] = "tracks"
-    points_used: int | None = Field(None, description="frames: points in the surfels matched across frames in the fit")
+    points_used: int | None = Field(
+        None,
+        description="frames: points in the fit: in surfels matched across frames, or on thin members fitted as lines",
+    )
     frame_rms_m: list[float | None] | None = Field(
         None,
         description="frames: RMS centroid-to-plane residual of each frame (null: no matches); a bad frame stands out",

@@ -41,6 +41,7 @@ from ...target.motion import N_PARAMS, canonical_params
 from ..options import DenseConfig
 from ..sensor import SensorNoise
 from ..validation import canonical_cov
+from .beams import Beams, beam_rows, find_beams
 from .covariance import patches, sandwich
 from .matching import CAUCHY_C, Linearized, Matches, cauchy_cost, linearize, match, residuals, robust_sigma, weights
 from .surfels import DenseData, LineMapping, Surfels, build_surfels
@@ -67,7 +68,7 @@ class DenseFit:
 
     rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
     source or target); residuals: residuals used; surfels: distinct source surfels; points:
-    the points in them; scale: the common scale ``s`` of the residuals' model sigmas (about 1
+    the points in them (and on the members); scale: the common scale ``s`` of the residuals' model sigmas (about 1
     when the motion fits; a wrong motion leaves residuals many times their model sigma).
     """
 
@@ -81,10 +82,48 @@ class DenseFit:
     points: int
     iterations: int
     scale: float
+    members: int = 0  # thin members fitted as lines (:mod:`.beams`)
 
     @property
     def spin_only(self) -> bool:
         return self.free == SPIN_ONLY_FREE
+
+
+@dataclass(frozen=True)
+class _Terms:
+    """What the residuals are made of: the surfels, their correspondences and the thin members."""
+
+    surf: Surfels
+    matches: Matches
+    beams: Beams
+
+    def linearize(self, problem: _Problem, mapping: LineMapping) -> Linearized:
+        """The surfels' residuals (:func:`.matching.linearize`), then the members' (:func:`.beams.beam_rows`)."""
+        lin = linearize(problem.data, mapping, self.surf, self.matches, problem.noise)
+        if self.beams.members == 0:
+            return lin
+        r, J, _ = beam_rows(self.beams, problem.data, mapping)
+        assert J is not None
+        return Linearized(
+            np.concatenate([lin.r, r]), np.vstack([lin.J, J]), np.concatenate([lin.var, self.beams.var_m2])
+        )
+
+    def residuals(self, problem: _Problem, mapping: LineMapping) -> FloatArray:
+        """The residuals alone, in the order of :meth:`linearize`."""
+        r = residuals(mapping, self.surf, self.matches)[0]
+        if self.beams.members == 0:
+            return r
+        return np.concatenate([r, beam_rows(self.beams, problem.data, mapping, jacobian=False)[0]])
+
+    def positions(self, problem: _Problem, mapping: LineMapping) -> FloatArray:
+        """Where each residual's source lies at ``T`` (its patch, for the covariance)."""
+        m, surf = self.matches, self.surf
+        anchors = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
+        if self.beams.members == 0:
+            return anchors
+        return np.vstack(
+            [anchors, mapping.apply(problem.data.xyz_m[self.beams.point], problem.data.line[self.beams.point])]
+        )
 
 
 @dataclass
@@ -151,17 +190,30 @@ def refine_dense(
         # 3. More partners from the converged start: each brings its own target noise.
         (_partners(data, cells, rng, window=None, k=cfg.fine_partners), cfg.fine_iterations),
     ]
-    surf: Surfels | None = None
     gate = max(data.extent_m / 20, 5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+    # Thin members join from the second stage on: at T their strips line up only once the
+    # frames roughly agree.
+    with_beams = [False, cfg.beams, cfg.beams]
     if converged:
-        stages, gate = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+        stages, gate, with_beams = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m), with_beams[2:]
     total = sum(iterations for _, iterations in stages)
-    for (src, partner), iterations in stages:
-        z, matches, surf, gate, step = _iterate(
-            problem, z, src, partner, surf, gate, iterations, step=step, total=total, on_iteration=on_iteration
+    terms: _Terms | None = None
+    for ((src, partner), iterations), beams_on in zip(stages, with_beams, strict=True):
+        z, terms, gate, step = _iterate(
+            problem,
+            z,
+            src,
+            partner,
+            terms,
+            gate,
+            iterations,
+            beams_on,
+            step=step,
+            total=total,
+            on_iteration=on_iteration,
         )
-    assert surf is not None
-    return _finish(problem, z, matches, surf, step)
+    assert terms is not None
+    return _finish(problem, z, terms, step)
 
 
 def _partners(
@@ -194,31 +246,41 @@ def _iterate(
     z: FloatArray,
     src: IntArray,
     partner: IntArray,
-    surf: Surfels | None,
+    terms: _Terms | None,
     gate: float,
     iterations: int,
+    beams_on: bool,
     *,
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
-) -> tuple[FloatArray, Matches, Surfels, float, int]:
+) -> tuple[FloatArray, _Terms, float, int]:
     """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
     distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
     floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
     probe = _probe(data)
     mapping = LineMapping(problem.full(z), data.tau_s, problem.free)
-    if surf is None or _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
+
+    def found_beams(surf: Surfels, mapping: LineMapping) -> Beams:
+        return find_beams(data, mapping, surf, noise) if beams_on else Beams.none()
+
+    if terms is None or _shift(data, probe, terms.surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = build_surfels(data, mapping, noise)
-    matches, matched_at, matched_gate = match(data, mapping, surf, src, partner, gate), mapping, gate
+        beams = found_beams(surf, mapping)
+    else:
+        surf = terms.surf
+        beams = terms.beams if beams_on and terms.beams.members else found_beams(surf, mapping)
+    terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+    matched_at, matched_gate = mapping, gate
     lam = LM_START
     for _ in range(iterations):
-        lin = linearize(data, mapping, surf, matches, noise)
+        lin = terms.linearize(problem, mapping)
         w, scale = weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
         H, g = rows.T @ rows, -rows.T @ (lin.r * sw)
-        taken = _damped_step(problem, z, H, g, lam, lin, scale, matches, surf)
+        taken = _damped_step(problem, z, H, g, lam, lin, scale, terms)
         if taken is None:
             break
         dz, lam, mapping = taken
@@ -233,17 +295,20 @@ def _iterate(
             break
         # Tighten the gate as the frames come together. Surfels move rigidly with their lines,
         # so they are rebuilt only after large steps; correspondences once points have moved.
-        gate = max(floor, min(gate, 4 * CAUCHY_C * robust_sigma(lin.r)))
+        gate = max(floor, min(gate, 4 * CAUCHY_C * robust_sigma(lin.r[: len(terms.matches.src)])))
+        surf, beams = terms.surf, terms.beams
         if _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
             surf = build_surfels(data, mapping, noise)
+            beams = found_beams(surf, mapping)
         if (
             surf.mapping is mapping
             or gate < 0.9 * matched_gate
             or _shift(data, probe, matched_at, mapping) > REMATCH * data.surfel_m
         ):
-            matches, matched_at, matched_gate = match(data, mapping, surf, src, partner, gate), mapping, gate
+            terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+            matched_at, matched_gate = mapping, gate
 
-    return z, matches, surf, gate, step
+    return z, terms, gate, step
 
 
 def _damped_step(
@@ -254,8 +319,7 @@ def _damped_step(
     lam: float,
     lin: Linearized,
     scale: float,
-    matches: Matches,
-    surf: Surfels,
+    terms: _Terms,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
     last one) that lowers the Cauchy cost on these correspondences; None when none does."""
@@ -267,7 +331,7 @@ def _damped_step(
         x = _on_gauge(problem, problem.full(z + step))
         dz = x[list(problem.free)] - z
         mapping = LineMapping(x, data.tau_s, problem.free)
-        r = residuals(mapping, surf, matches)[0]
+        r = terms.residuals(problem, mapping)
         after = cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
             return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
@@ -306,21 +370,24 @@ def _on_gauge(problem: _Problem, x: FloatArray) -> FloatArray:
     return out
 
 
-def _finish(problem: _Problem, z: FloatArray, m: Matches, surf: Surfels, steps: int) -> DenseFit:
+def _finish(problem: _Problem, z: FloatArray, terms: _Terms, steps: int) -> DenseFit:
     """Covariance and residual statistics at ``z`` with the last step's correspondences."""
     data = problem.data
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
-    lin = linearize(data, mapping, surf, m, problem.noise)
+    lin = terms.linearize(problem, mapping)
     scale = weights(lin)[1]
-    cluster = patches(mapping.apply(surf.anchor_obs[m.src], surf.line[m.src]), CLUSTER_FRACTION * data.extent_m)
+    cluster = patches(terms.positions(problem, mapping), CLUSTER_FRACTION * data.extent_m)
     cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * scale, cluster, _gauge_row(problem, x))
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
-    inlier = np.abs(lin.r) <= 3 * scale * np.sqrt(lin.var)
+    # The centroid-to-plane residuals' statistics (the members' offsets follow them in ``lin``).
+    m, surf = terms.matches, terms.surf
+    n = len(m.src)
+    inlier = np.abs(lin.r[:n]) <= 3 * scale * np.sqrt(lin.var[:n])
     sources = np.unique(m.src)
-    r_in = lin.r[inlier]
+    r_in = lin.r[:n][inlier]
     frame_sq = np.zeros(data.n_frames)
     frame_n = np.zeros(data.n_frames)
     for fr in (data.cell_frame[m.src], data.cell_frame[m.dst]):
@@ -336,7 +403,8 @@ def _finish(problem: _Problem, z: FloatArray, m: Matches, surf: Surfels, steps: 
         frame_rms_m=frame_rms,
         residuals=len(lin.r),
         surfels=len(sources),
-        points=int(surf.count[sources].sum()),
+        points=int(surf.count[sources].sum()) + len(terms.beams.point),
         iterations=steps,
         scale=scale,
+        members=terms.beams.members,
     )
