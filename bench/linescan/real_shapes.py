@@ -2,6 +2,7 @@
 
     python -m bench.linescan.real_shapes [--motions 10] [--distances 50 100] [--size 512]
                                           [--shapes box telescope ... hubble] [--stem NAME]
+                                          [--first-seed 0] [--no-beams]
     python -m bench.linescan.real_shapes --report bench/out/A.json bench/out/B.json [--rebound]
 
 Each case: a seeded motion on the paper's grid, 15 frames (Table 1 scanner and noise) of the
@@ -40,10 +41,20 @@ from typing import Any, Literal
 
 import numpy as np
 
-from tumblescan import Motion, Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
+from tumblescan import (
+    FramesOptions,
+    Motion,
+    Scanner,
+    Scene,
+    TimedCloud,
+    estimate_from_frames,
+    random_motion,
+    simulate_frames,
+)
 from tumblescan._open3d import load_open3d
 from tumblescan.linescan.dense.degeneracy import AXIS_LIMIT_DEG, RATE_LIMIT_DEG_S
 from tumblescan.linescan.frames import assemble_frames
+from tumblescan.linescan.options import DenseConfig
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.target.shape import SatelliteShape
 from tumblescan.target.shapes import PARAMETRIC, MeshFileShape
@@ -91,17 +102,26 @@ def shape_named(name: str) -> Any:
     return PARAMETRIC[name]()
 
 
-def one(name: str, distance_m: float, seed: int, size: int) -> Case:
+def one(name: str, distance_m: float, seed: int, size: int, options: FramesOptions | None = None) -> Case:
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    return estimated(name, distance_m, seed, motion, scene, simulate_frames(motion, scene, seed=seed))
+    return estimated(name, distance_m, seed, motion, scene, simulate_frames(motion, scene, seed=seed), options)
 
 
-def estimated(name: str, distance_m: float, seed: int, motion: Motion, scene: Scene, sim: FrameCloud) -> Case:
-    """The whole estimate on the frames ``sim`` of ``motion``, judged against the truth and the bound."""
+def estimated(
+    name: str,
+    distance_m: float,
+    seed: int,
+    motion: Motion,
+    scene: Scene,
+    sim: FrameCloud,
+    options: FramesOptions | None = None,
+) -> Case:
+    """The whole estimate on the frames ``sim`` of ``motion`` (default options, or ``options``),
+    judged against the truth and the bound."""
     frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
     started = time.perf_counter()
-    result = estimate_from_frames(frames)
+    result = estimate_from_frames(frames, options)
     seconds = time.perf_counter() - started
     e = errors(result, motion)
     within = (
@@ -309,6 +329,8 @@ def report(cases: list[Case], stem: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--motions", type=int, default=10)
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + motions - 1")
+    parser.add_argument("--no-beams", action="store_true", help="without thin members as lines (DenseConfig.beams)")
     parser.add_argument("--distances", type=float, nargs="+", default=[50.0, 100.0])
     parser.add_argument("--size", type=int, default=512, help="lines and pixels per frame")
     parser.add_argument("--shapes", nargs="+", default=["box", *PARAMETRIC, "hubble"])
@@ -326,10 +348,12 @@ def main() -> None:
         args.shapes.remove("hubble")
     # Open3D's import (about 1.5 s) is paid once per worker, not per job: not in the first case's time.
     load_open3d()
+    options = FramesOptions(dense=DenseConfig(beams=False)) if args.no_beams else None
     cases: list[Case] = []
     for name in args.shapes:
         for distance in args.distances:
-            cases += [one(name, distance, seed, args.size) for seed in range(args.motions)]
+            seeds = range(args.first_seed, args.first_seed + args.motions)
+            cases += [one(name, distance, seed, args.size, options) for seed in seeds]
             print(f"  {name} at {distance:g} m done ({os.getloadavg()[0]:.1f} load average)", flush=True)
     report(cases, args.stem)
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6

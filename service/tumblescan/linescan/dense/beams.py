@@ -9,18 +9,19 @@ At ``T`` the hits of one member, from every frame, lie along one line ``c + s d`
 a line at ``tau``, mapped to ``T`` by the motion ``x``, gives the offset
 
     r = e . (M(p, tau; x) - c),    e = d x u / |d x u|,
-    var r = (s_a rho)^2 + w_f
+    var r = max(w_f, (s_a rho)^2)
 
-across the line and across its line of sight ``u`` (turned to ``T``): the sensor's angle noise,
-plus ``w_f``, the spread of the member's hits across it in that frame (its section, as the
-pixels see it). Along the sight the hits lie on the faces the sensor sees, on its side of the
+across the line and across its line of sight ``u`` (turned to ``T``): ``w_f`` is the spread of
+the member's hits across it in that frame (its section as the pixels see it, with the sensor's
+angle noise; the member's own spread where a frame has few hits), at least the angle noise
+``(s_a rho)^2``. Along the sight the hits lie on the faces the sensor sees, on its side of the
 axis by up to half the member's width, an offset that turns with the view: that direction is
 left out. The line is a nuisance (two offsets, two tilts), eliminated per member: the rows are
 projected off its four directions (variable projection, Kaufman's Jacobian).
 
-Members are found at the current motion (:func:`find_beams`): strips (a cell's points, or a
-3x3 block's, along one direction) with no planar cell beside them, joined across frames where
-they lie on one line at ``T``; a group counts as a member when at least ``MIN_FRAMES`` frames see
+Members are found at the current motion (:func:`find_beams`): strips (a cell's free points,
+split where their ranges jump, along one direction) with no planar cell beside them, joined
+across frames where they lie on one line at ``T``; a group counts as a member when at least ``MIN_FRAMES`` frames see
 it, it is ``MIN_LENGTH_SURFELS`` surfels long and its hits keep within ``MAX_SPREAD_M`` of the line.
 """
 
@@ -49,10 +50,12 @@ LINK_SURFELS = 2.5
 LINK_MAX_ANGLE = np.radians(15.0)
 LINK_SURFELS_ACROSS = 0.5
 # A member's strips: centres within MEMBER_SURFELS_ACROSS surfels of its line, directions within
-# MEMBER_MAX_ANGLE; the best of MAX_SEEDS strips (the fullest) seeds each line.
+# MEMBER_MAX_ANGLE; the best of MAX_SEEDS strips seeds each line, until MAX_IDLE_ROUNDS rounds in a
+# row find none.
 MEMBER_SURFELS_ACROSS = 0.5
 MEMBER_MAX_ANGLE = np.radians(30.0)
 MAX_SEEDS = 40
+MAX_IDLE_ROUNDS = 5
 GROW_REACH_SURFELS = (2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
 # A member: seen in this many frames, this long, its hits this close to its line (RMS, m).
 MIN_FRAMES = 3
@@ -228,7 +231,8 @@ def _members(
     untried = left.copy()
     out: list[IntArray] = []
     rng = np.random.default_rng(0)
-    while len(left) >= MIN_FRAMES and len(untried):
+    idle = 0  # rounds in a row without a member: a large group of strips that are no members
+    while len(left) >= MIN_FRAMES and len(untried) and idle < MAX_IDLE_ROUNDS:
         seeds = untried if len(untried) <= MAX_SEEDS else rng.choice(untried, MAX_SEEDS, replace=False)
         untried = np.setdiff1d(untried, seeds)
         best, best_weight = np.zeros(0, dtype=np.int64), 0.0
@@ -241,6 +245,7 @@ def _members(
                 along = (centre[on] - c) @ d
                 if np.ptp(along) >= MIN_LENGTH_SURFELS * surfel_m:
                     best, best_weight = on, float(weight[on].sum())
+        idle = 0 if len(best) else idle + 1
         if len(best):
             out.append(best)
             left = np.setdiff1d(left, best)
@@ -397,9 +402,11 @@ def _member_hits(
     """The hits ``idx`` of one member that lie on its line (not seen end on, not another part's),
     and each one's offset variance; None when they are no member (too few frames, too short, or
     spread wider than ``MAX_SPREAD_M``)."""
+    if len(np.unique(data.frame[idx])) < MIN_FRAMES:
+        return None
     keep = np.ones(len(idx), dtype=bool)
     for _ in range(2):
-        # The line, then the hits off it (a node, a crossing member), then the line again.
+        # The line, then the hits off it (a node, a crossing member), twice (beam_rows fits it anew).
         c, d = _fit_line(y_t[idx[keep]], np.ones(int(keep.sum())))
         along = (y_t[idx] - c) @ d
         off = y_t[idx] - c - along[:, None] * d
@@ -444,7 +451,7 @@ def beam_rows(
         s = slice(beams.bounds[k], beams.bounds[k + 1])
         c, d = _fit_line(y[s], w[s])
         ek = np.cross(d, u[s])
-        ek /= np.linalg.norm(ek, axis=1, keepdims=True)
+        ek /= np.maximum(np.linalg.norm(ek, axis=1, keepdims=True), 1e-12)
         E = np.stack(perpendiculars(d[None, :]), axis=1)[0]  # (2, 3): the line's offsets and tilts
         ee = ek @ E.T
         J_line[s] = -np.concatenate([ee, ((y[s] - c) @ d)[:, None] * ee], axis=1)

@@ -17,7 +17,9 @@ minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
 Levenberg-Marquardt steps (kept only when they lower that cost), with correspondences
 re-found once points have moved and the surfels rebuilt after large steps.
 
-Correspondences and the residual model: :mod:`.matching`.
+Correspondences and the residual model: :mod:`.matching`. Thin members (booms, truss wires)
+that make no planar surfel join from the second stage on, each hit's offset across its
+member's line (:mod:`.beams`); their rows follow the surfels' in the cost and the covariance.
 
 Three stages: every surfel matched in a neighbouring frame (right correspondences even from
 the initializer's rough start), then in random frames (the long time baselines fix the
@@ -67,7 +69,7 @@ class DenseFit:
     """Result of :func:`refine_dense`: canonical 9-vector, its 9x9 covariance, fit statistics.
 
     rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
-    source or target); residuals: residuals used; surfels: distinct source surfels; points:
+    source or target); residuals: centroid-to-plane residuals used; surfels: distinct source surfels; points:
     the points in them (and on the members); scale: the common scale ``s`` of the residuals' model sigmas (about 1
     when the motion fits; a wrong motion leaves residuals many times their model sigma).
     """
@@ -269,8 +271,9 @@ def _iterate(
         surf = build_surfels(data, mapping, noise)
         beams = found_beams(surf, mapping)
     else:
+        # A stage's start is a new motion: the members (their hits and variances) are found anew.
         surf = terms.surf
-        beams = terms.beams if beams_on and terms.beams.members else found_beams(surf, mapping)
+        beams = found_beams(surf, mapping)
     terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
     matched_at, matched_gate = mapping, gate
     lam = LM_START
@@ -322,7 +325,7 @@ def _damped_step(
     terms: _Terms,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
-    last one) that lowers the Cauchy cost on these correspondences; None when none does."""
+    last one) that lowers the Cauchy cost on these correspondences and members; None when none does."""
     data = problem.data
     before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
     D = np.diag(np.diag(H))
@@ -376,15 +379,16 @@ def _finish(problem: _Problem, z: FloatArray, terms: _Terms, steps: int) -> Dens
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
     lin = terms.linearize(problem, mapping)
-    scale = weights(lin)[1]
     cluster = patches(terms.positions(problem, mapping), CLUSTER_FRACTION * data.extent_m)
-    cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * scale, cluster, _gauge_row(problem, x))
+    # The covariance with the scale the fit weighed every row by; the fit's statistics from the
+    # centroid-to-plane residuals alone (the members' offsets are scaled by their own spread).
+    cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * weights(lin)[1], cluster, _gauge_row(problem, x))
+    m, surf = terms.matches, terms.surf
+    n = len(m.src)
+    scale = weights(Linearized(lin.r[:n], lin.J[:n], lin.var[:n]))[1]
     cov9 = np.zeros((N_PARAMS, N_PARAMS))
     idx = np.array(problem.free)
     cov9[np.ix_(idx, idx)] = cov_free
-    # The centroid-to-plane residuals' statistics (the members' offsets follow them in ``lin``).
-    m, surf = terms.matches, terms.surf
-    n = len(m.src)
     inlier = np.abs(lin.r[:n]) <= 3 * scale * np.sqrt(lin.var[:n])
     sources = np.unique(m.src)
     r_in = lin.r[:n][inlier]
@@ -401,7 +405,7 @@ def _finish(problem: _Problem, z: FloatArray, terms: _Terms, steps: int) -> Dens
         free=problem.free,
         rms_m=float(np.sqrt(np.mean(r_in**2))) if len(r_in) else float("nan"),
         frame_rms_m=frame_rms,
-        residuals=len(lin.r),
+        residuals=n,
         surfels=len(sources),
         points=int(surf.count[sources].sum()) + len(terms.beams.point),
         iterations=steps,
