@@ -34,13 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from tumblescan import Scanner, Scene, random_motion, simulate_frames
-from tumblescan._open3d import load_open3d
 from tumblescan.linescan.dense.degeneracy import AXIS_LIMIT_DEG, RATE_LIMIT_DEG_S
 from tumblescan.target.shapes import PARAMETRIC
 
-from ..common import machine, out_dir, table
+from ..common import out_dir, table
 from .dense_bound import bound_covariances, share_within
-from .real_shapes import HUBBLE, shape_named
+from .real_shapes import shape_named, start_run
 
 GOAL_SHARE = 0.95
 BENCH_MOTIONS = 10  # per range, as the real-shapes bench runs
@@ -194,11 +193,7 @@ def main() -> None:
     if args.report:
         report([Reach(**r) for path in args.report for r in json.loads(path.read_text())], bench)
         return
-    print(machine())
-    if "hubble" in args.shapes and not HUBBLE.is_file():
-        print(f"skipping hubble: {HUBBLE} is absent")
-        args.shapes.remove("hubble")
-    load_open3d()
+    args.shapes = start_run(args.shapes)
     out = out_dir()
     reaches: list[Reach] = []
     for name in args.shapes:

@@ -326,6 +326,18 @@ def report(cases: list[Case], stem: str) -> None:
     print(f"wrote {out / stem}.json and .png")
 
 
+def start_run(shapes: list[str]) -> list[str]:
+    """Print the machine, load Open3D and return ``shapes`` less the Hubble mesh when its file is
+    absent (saying so). Open3D's import (about 1.5 s) is paid once per worker, not per job: not in
+    the first case's time."""
+    print(machine())
+    if "hubble" in shapes and not HUBBLE.is_file():
+        print(f"skipping hubble: {HUBBLE} is absent")
+        shapes = [s for s in shapes if s != "hubble"]
+    load_open3d()
+    return shapes
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--motions", type=int, default=10)
@@ -342,12 +354,7 @@ def main() -> None:
         saved = [Case(**c) for path in args.report for c in json.loads(path.read_text())]
         report([rebound(c, args.size) for c in saved] if args.rebound else saved, args.stem)
         return
-    print(machine())
-    if "hubble" in args.shapes and not HUBBLE.is_file():
-        print(f"skipping hubble: {HUBBLE} is absent")
-        args.shapes.remove("hubble")
-    # Open3D's import (about 1.5 s) is paid once per worker, not per job: not in the first case's time.
-    load_open3d()
+    args.shapes = start_run(args.shapes)
     options = FramesOptions(dense=DenseConfig(beams=False)) if args.no_beams else None
     cases: list[Case] = []
     for name in args.shapes:

@@ -189,7 +189,7 @@ def _result(
             "validation": validation_fields(check, frames.n_frames, n2),
             "solver": {
                 "path": f"{main.path} ({main.pairs_used} of {main.pairs_total} frame pairs agreed"
-                + (f"; {fit.members} thin members fitted as lines)" if fit.members else ")"),
+                + (f"; {fit.members} thin member{'s' * (fit.members > 1)} fitted as lines)" if fit.members else ")"),
                 "iterations": fit.iterations,
                 "attempts": attempts,
                 "elapsed_s": elapsed_s,
