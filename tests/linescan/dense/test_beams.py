@@ -101,8 +101,8 @@ def test_derivatives_match_the_offsets_moved_by_the_motion() -> None:
     _, J, _ = beam_rows(beams, data, mapping)
     assert J is not None
     # Kaufman's Jacobian leaves out a term of the order of the offsets (3 cm on the wires' pixels):
-    # within 5 % of each column (measured: 0.5-2.4 %), of the centre's largest for the centre (one of them is nearly nil:
-    # a shift of the centre along the members moves their lines, which take it up).
+    # within 5 % of each column (measured: 0.5-2.4 %), of the centre's largest for the centre (one
+    # of them is nearly nil: a shift of the centre along the members moves their lines, which take it up).
     centre_norm = float(np.max(np.linalg.norm(J[:, 6:], axis=0)))
     for j, h in enumerate((1e-7,) * 6 + (1e-5,) * 3):
         x_hi, x_lo = mapping.x.copy(), mapping.x.copy()
