@@ -77,6 +77,8 @@ MAX_BESIDE_PLANE = 0.6
 CLAIM_SURFELS = 1.0
 # A hit whose sight runs within this angle of the member says little across it (seen end on).
 MIN_SIGHT_ANGLE = np.radians(30.0)
+# Segments (a surfel long) of one frame's hits of a member needed to measure how their offsets err together.
+MIN_SEGMENTS = 4
 # A hit this many robust sigmas off its member's line is another part's (a node, a crossing member).
 OUTLIER_SIGMAS = 3.0
 
@@ -423,14 +425,28 @@ def _member_hits(
         return None
     if np.sqrt(np.mean(np.sum(off[keep] ** 2, axis=1))) > MAX_SPREAD_M:
         return None
-    idx, r, frame = idx[keep], r[keep], frame[keep]
+    idx, r, frame, segment = idx[keep], r[keep], frame[keep], np.floor(along[keep] / data.surfel_m).astype(np.int64)
     # The member's section as the pixels see it, per frame: the spread of its hits across it.
     spread = np.full(len(idx), scale**2)
     for f in np.unique(frame):
         on = frame == f
         if on.sum() >= MIN_LINE_POINTS:
             spread[on] = (1.4826 * np.median(np.abs(r[on] - np.median(r[on])))) ** 2
+            spread[on] = np.maximum(spread[on], _correlated(r[on], segment[on]))
     return idx, np.maximum(spread, lateral_var[idx])
+
+
+def _correlated(r: FloatArray, segment: IntArray) -> float:
+    """Per hit, the variance that weighs a segment's hits (a surfel of the member long) as what their
+    mean holds: the hits' offsets err together along a member (which pixels hit a wire two pixels
+    wide changes slowly along it), so ``n`` of them hold no more than their mean's scatter from
+    segment to segment, ``n var(segment means)``; 0 with fewer than ``MIN_SEGMENTS`` segments."""
+    _, inverse, n = np.unique(segment, return_inverse=True, return_counts=True)
+    full = n >= 2
+    if full.sum() < MIN_SEGMENTS:
+        return 0.0
+    means = np.bincount(inverse, r) / n
+    return float(np.mean(n[full]) * np.var(means[full], ddof=1))
 
 
 def beam_rows(
