@@ -14,7 +14,9 @@ a line at ``tau``, mapped to ``T`` by the motion ``x``, gives the offset
 across the line and across its line of sight ``u`` (turned to ``T``): ``w_f`` is the spread of
 the member's hits across it in that frame (its section as the pixels see it, with the sensor's
 angle noise; the member's own spread where a frame has few hits), at least the angle noise
-``(s_a rho)^2``. Along the sight the hits lie on the faces the sensor sees, on its side of the
+``(s_a rho)^2``, and at least the hits per segment (a surfel of the member) times the scatter of
+the segments' mean offsets: which pixels hit a wire two pixels wide changes slowly along it, so
+neighbouring hits err together and hold no more than their mean does. Along the sight the hits lie on the faces the sensor sees, on its side of the
 axis by up to half the member's width, an offset that turns with the view: that direction is
 left out. The line is a nuisance (two offsets, two tilts), eliminated per member: the rows are
 projected off its four directions (variable projection, Kaufman's Jacobian).
