@@ -16,10 +16,11 @@ the member's hits across it in that frame (its section as the pixels see it, wit
 angle noise; the member's own spread where a frame has few hits), at least the angle noise
 ``(s_a rho)^2``, and at least the hits per segment (a surfel of the member) times the scatter of
 the segments' mean offsets: which pixels hit a wire two pixels wide changes slowly along it, so
-neighbouring hits err together and hold no more than their mean does. Along the sight the hits lie on the faces the sensor sees, on its side of the
-axis by up to half the member's width, an offset that turns with the view: that direction is
-left out. The line is a nuisance (two offsets, two tilts), eliminated per member: the rows are
-projected off its four directions (variable projection, Kaufman's Jacobian).
+neighbouring hits err together and hold no more than their mean does. Along the sight the hits
+lie on the faces the sensor sees, on its side of the axis by up to half the member's width, an
+offset that turns with the view: that direction is left out. The line is a nuisance (two
+offsets, two tilts), eliminated per member: the rows are projected off its four directions
+(variable projection, Kaufman's Jacobian).
 
 Members are found at the current motion (:func:`find_beams`): strips (a cell's free points,
 split where their ranges jump, along one direction) with no planar cell beside them, joined
