@@ -50,15 +50,18 @@ def _found(shape: str, noise: bool = True) -> tuple[Motion, Scene, FrameCloud, D
 def test_the_truss_wires_are_found_as_members_and_nothing_else_is() -> None:
     motion, scene, sim, data, _, beams = _found("truss")
     kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
-    on_beam = beam_of_hits(scene, motion, sim.reference_m)[kept] >= 0
+    part = beam_of_hits(scene, motion, sim.reference_m)[kept]
+    on_beam = part >= 0
     assert beams.members >= 10
     # Most of the wires' hits, and nothing but them: a tenth of all hits lie on the wires.
     assert len(beams.point) >= 0.03 * len(data.xyz_m)
     assert np.mean(on_beam[beams.point]) >= 0.97
-    # Every member's hits lie on one wire.
+    # Every member's hits lie mostly on one wire, seen in 3 frames. Near a node a member claims
+    # hits of the wires that meet it there too (at 100 m seed 5: 64-98 % on its own wire).
     for k in range(beams.members):
         hits = beams.point[beams.bounds[k] : beams.bounds[k + 1]]
-        assert np.all(np.diff(beams.member[beams.bounds[k] : beams.bounds[k + 1]]) == 0)
+        wires = part[hits][part[hits] >= 0]
+        assert np.bincount(wires).max() >= 0.6 * len(hits)
         assert len(np.unique(data.frame[hits])) >= 3
 
 

@@ -89,11 +89,10 @@ OUTLIER_SIGMAS = 3.0
 @dataclass(frozen=True)
 class Beams:
     """The hits on members, grouped by member: ``point`` ``(n,)`` indices into the data's points,
-    sorted by ``member`` ``(n,)``; ``var_m2`` ``(n,)`` each offset's variance (before the common
-    scale); ``bounds`` ``(members + 1,)`` where each member's hits start in ``point``."""
+    member by member; ``var_m2`` ``(n,)`` each offset's variance (before the common scale);
+    ``bounds`` ``(members + 1,)`` where each member's hits start in ``point``."""
 
     point: IntArray
-    member: IntArray
     var_m2: FloatArray
     bounds: IntArray
 
@@ -104,7 +103,7 @@ class Beams:
     @staticmethod
     def none() -> Beams:
         empty = np.zeros(0, dtype=np.int64)
-        return Beams(empty, empty, np.zeros(0), np.zeros(1, dtype=np.int64))
+        return Beams(empty, np.zeros(0), np.zeros(1, dtype=np.int64))
 
 
 def _moments(cell: IntArray, y: FloatArray, m: int) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -292,10 +291,8 @@ def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: Sens
     lateral_var[idx] = (noise.angle_sigma_rad * np.linalg.norm(data.xyz_m[idx], axis=1)) ** 2
     across_m = MEMBER_SURFELS_ACROSS * data.surfel_m
     members: list[IntArray] = []
-    order = np.argsort(group, kind="stable")
-    starts = np.searchsorted(group[order], np.arange(int(group.max(initial=-1)) + 2))
-    for g in range(len(starts) - 1):
-        mine = pieces[order[starts[g] : starts[g + 1]]]
+    for in_group in _by_label(group, int(group.max(initial=-1)) + 1):
+        mine = pieces[in_group]
         if len(np.unique(frame[mine])) < MIN_FRAMES:
             continue
         members += [
@@ -311,21 +308,23 @@ def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: Sens
     # Every free hit near a member's line is its (the pieces too short or too mixed for a strip
     # of their own too), the nearest member's where two are near.
     point_member = _claimed(y_t, free, lines, CLAIM_SURFELS * data.surfel_m)
-    n_members = len(lines)
-    order = np.argsort(point_member, kind="stable")
-    starts = np.searchsorted(point_member[order], np.arange(n_members + 1))
     points, variances = [], []
-    for k in range(n_members):
-        hits = _member_hits(data, order[starts[k] : starts[k + 1]], y_t, sight_t, lateral_var)
+    for claimed in _by_label(point_member, len(lines)):
+        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var)
         if hits is not None:
             points.append(hits[0])
             variances.append(hits[1])
     if not points:
         return Beams.none()
-    member = np.concatenate([np.full(len(p), k, dtype=np.int64) for k, p in enumerate(points)])
-    return Beams(
-        np.concatenate(points), member, np.concatenate(variances), np.searchsorted(member, np.arange(len(points) + 1))
-    )
+    bounds = np.concatenate([[0], np.cumsum([len(p) for p in points])]).astype(np.int64)
+    return Beams(np.concatenate(points), np.concatenate(variances), bounds)
+
+
+def _by_label(label: IntArray, n: int) -> list[IntArray]:
+    """The indices of each label ``0 .. n-1`` in ``label`` (others, such as ``-1``, left out), in order."""
+    order = np.argsort(label, kind="stable")
+    starts = np.searchsorted(label[order], np.arange(n + 1))
+    return [order[starts[k] : starts[k + 1]] for k in range(n)]
 
 
 def _merged(

@@ -69,9 +69,10 @@ class DenseFit:
     """Result of :func:`refine_dense`: canonical 9-vector, its 9x9 covariance, fit statistics.
 
     rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
-    source or target); residuals: centroid-to-plane residuals used; surfels: distinct source surfels; points:
-    the points in them (and on the members); scale: the common scale ``s`` of the residuals' model sigmas (about 1
-    when the motion fits; a wrong motion leaves residuals many times their model sigma).
+    source or target); residuals: centroid-to-plane residuals used; surfels: distinct source
+    surfels; points: the points in them and on the members; scale: the common scale ``s`` of the
+    centroid-to-plane residuals' model sigmas (about 1 when the motion fits; a wrong motion leaves
+    residuals many times their model sigma).
     """
 
     x: FloatArray
@@ -269,11 +270,10 @@ def _iterate(
 
     if terms is None or _shift(data, probe, terms.surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = build_surfels(data, mapping, noise)
-        beams = found_beams(surf, mapping)
     else:
-        # A stage's start is a new motion: the members (their hits and variances) are found anew.
         surf = terms.surf
-        beams = found_beams(surf, mapping)
+    # A stage's start is a new motion: the members (their hits and variances) are found anew.
+    beams = found_beams(surf, mapping)
     terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
     matched_at, matched_gate = mapping, gate
     lam = LM_START
