@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
-from tumblescan.linescan.dense.beams import _moments
+from tumblescan.linescan.dense.beams import _line_shape, _moments
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS, flat_cells
 from tumblescan.linescan.dense.registration import extent_m
@@ -105,12 +105,7 @@ def beam_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> IntAr
 def _is_line(count: FloatArray, s1: FloatArray, s2: FloatArray, los_t: FloatArray, range_var_m2: float,
              ratio: float) -> BoolArray:  # fmt: skip
     """One dominant direction of the scatter less the range noise along ``los_t`` (unit, at ``T``)."""
-    safe = np.maximum(count, 1)[:, None, None]
-    mean = s1 / safe[:, :, 0]
-    cov = s2 / safe - mean[:, :, None] * mean[:, None, :]
-    cov -= range_var_m2 * los_t[:, :, None] * los_t[:, None, :]
-    w = np.linalg.eigvalsh(cov)
-    return np.asarray((count >= MIN_LINE_POINTS) & (np.maximum(w[:, 1], 0.0) <= w[:, 2] / ratio))
+    return _line_shape(count, s1, s2, los_t, range_var_m2, ratio=ratio, min_points=MIN_LINE_POINTS)[0]
 
 
 def classify(data: DenseData, mapping: LineMapping, planar_point: BoolArray, planar_cell: BoolArray,

@@ -118,16 +118,24 @@ def _moments(cell: IntArray, y: FloatArray, m: int) -> tuple[FloatArray, FloatAr
 
 
 def _line_shape(
-    count: FloatArray, s1: FloatArray, s2: FloatArray, sight_t: FloatArray, range_var_m2: float
+    count: FloatArray,
+    s1: FloatArray,
+    s2: FloatArray,
+    sight_t: FloatArray,
+    range_var_m2: float,
+    *,
+    ratio: float = LINE_RATIO,
+    min_points: int = MIN_LINE_POINTS,
 ) -> tuple[NDArray[np.bool_], FloatArray]:
     """Whether the moments' scatter, less the range noise along ``sight_t`` (unit, at ``T``), has one
-    dominant direction (``LINE_RATIO``), and that direction ``(m, 3)``."""
+    dominant direction (its variance ``ratio`` times the next, from ``min_points``), and that
+    direction ``(m, 3)``."""
     safe = np.maximum(count, 1)
     mean = s1 / safe[:, None]
     cov = s2 / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
     cov -= range_var_m2 * sight_t[:, :, None] * sight_t[:, None, :]
     w, V = np.linalg.eigh(cov)
-    line = (count >= MIN_LINE_POINTS) & (np.maximum(w[:, 1], 0.0) * LINE_RATIO <= w[:, 2])
+    line = (count >= min_points) & (np.maximum(w[:, 1], 0.0) * ratio <= w[:, 2])
     return np.asarray(line), np.asarray(V[:, :, 2])
 
 
