@@ -16,11 +16,20 @@ the member's hits across it in that frame (its section as the pixels see it, wit
 angle noise; the member's own spread where a frame has few hits), at least the angle noise
 ``(s_a rho)^2``, and at least the hits per segment (a surfel of the member) times the scatter of
 the segments' mean offsets: which pixels hit a wire two pixels wide changes slowly along it, so
-neighbouring hits err together and hold no more than their mean does. Along the sight the hits
-lie on the faces the sensor sees, on its side of the axis by up to half the member's width, an
-offset that turns with the view: that direction is left out. The line is a nuisance (two
-offsets, two tilts), eliminated per member: the rows are projected off its four directions
-(variable projection, Kaufman's Jacobian).
+neighbouring hits err together and hold no more than their mean does.
+
+Along the sight, ``a = d x e`` (towards the sensor), the hits lie on the faces the sensor sees,
+ahead of the axis by ``b``, about half the member's width:
+
+    r_a = a . (M(p, tau; x) - c) - b,    var r_a = max(v_f, s_r^2),
+
+``v_f`` the hits' spread along the sight in that frame (range noise and the section's depth),
+floored as above. ``b`` is the member's own (``pi w / 8`` for a round section of width ``w``);
+on a square section it changes as the view turns about the axis (0.35-0.5 of the width), an
+error common to a frame's hits, ``DEPTH_WOBBLE`` times their spread across RMS: those rows are
+whitened for it (:func:`_shrinks`). The line and ``b`` are nuisances (two offsets, two tilts, the
+depth), eliminated per member: the rows are projected off their five directions (variable
+projection, Kaufman's Jacobian).
 
 Members are found at the current motion (:func:`find_beams`): strips (a cell's free points,
 split where their ranges jump, along one direction) with no planar cell beside them, joined
@@ -30,6 +39,7 @@ it, it is ``MIN_LENGTH_SURFELS`` surfels long and its hits keep within ``MAX_SPR
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,26 +94,50 @@ MIN_SIGHT_ANGLE = np.radians(30.0)
 MIN_SEGMENTS = 4
 # A hit this many robust sigmas off its member's line is another part's (a node, a crossing member).
 OUTLIER_SIGMAS = 3.0
+# How far the faces seen of a square section lie ahead of its axis changes as the view turns about
+# it (0.35-0.5 of its width): by this many times the spread of its hits across it, RMS, common to a
+# frame's hits (measured at the true motion: 0.4-1.0 cm on the 10 cm boom, 0.5-0.6 cm on the 12 cm).
+DEPTH_WOBBLE = 0.15
 
 
 @dataclass(frozen=True)
 class Beams:
     """The hits on members, grouped by member: ``point`` ``(n,)`` indices into the data's points,
-    member by member; ``var_m2`` ``(n,)`` each offset's variance (before the common scale);
-    ``bounds`` ``(members + 1,)`` where each member's hits start in ``point``."""
+    member by member; ``var_m2`` ``(n,)`` each offset's variance across the line (before the
+    common scale); ``bounds`` ``(members + 1,)`` where each member's hits start in ``point``;
+    ``depth_var_m2`` ``(n,)`` the variance of each offset along the sight, or ``(0,)`` when
+    those rows are left out, and ``depth_shrink`` ``(n,)`` the share of its member's mean in its
+    frame taken off each of them (:func:`_shrinks`)."""
 
     point: IntArray
     var_m2: FloatArray
     bounds: IntArray
+    depth_var_m2: FloatArray
+    depth_shrink: FloatArray
 
     @property
     def members(self) -> int:
         return len(self.bounds) - 1
 
+    @property
+    def depth(self) -> bool:
+        """Whether each hit has a row along the sight too."""
+        return len(self.depth_var_m2) > 0
+
+    @property
+    def row_var_m2(self) -> FloatArray:
+        """The variance of each row of :func:`beam_rows`: across the lines, then along the sights."""
+        return np.concatenate([self.var_m2, self.depth_var_m2])
+
+    @property
+    def row_point(self) -> IntArray:
+        """The hit of each row of :func:`beam_rows`."""
+        return np.concatenate([self.point, self.point[: len(self.depth_var_m2)]])
+
     @staticmethod
     def none() -> Beams:
         empty = np.zeros(0, dtype=np.int64)
-        return Beams(empty, np.zeros(0), np.zeros(1, dtype=np.int64))
+        return Beams(empty, np.zeros(0), np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0))
 
 
 def _moments(cell: IntArray, y: FloatArray, m: int) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -281,9 +315,11 @@ def _sights(data: DenseData, mapping: LineMapping, idx: IntArray) -> FloatArray:
     return mapping.rotate(xyz / np.linalg.norm(xyz, axis=1, keepdims=True), data.line[idx])
 
 
-def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise) -> Beams:
+def find_beams(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, *, depth: bool = True
+) -> Beams:
     """The members at the motion ``mapping`` (module docstring), from the points in no planar
-    surfel of ``surf``."""
+    surfel of ``surf``; with each hit's offset along the sight too when ``depth``."""
     free = ~surf.planar[surf.point_cell]
     # Only the free points are read below: the others' rows stay zero.
     idx = np.flatnonzero(free)
@@ -316,16 +352,16 @@ def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: Sens
     # Every free hit near a member's line is its (the pieces too short or too mixed for a strip
     # of their own too), the nearest member's where two are near.
     point_member = _claimed(y_t, free, lines, CLAIM_SURFELS * data.surfel_m)
-    points, variances = [], []
+    found = []
     for claimed in _by_label(point_member, len(lines)):
-        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var)
+        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var, noise.range_sigma_m**2, depth)
         if hits is not None:
-            points.append(hits[0])
-            variances.append(hits[1])
-    if not points:
+            found.append(hits)
+    if not found:
         return Beams.none()
-    bounds = np.concatenate([[0], np.cumsum([len(p) for p in points])]).astype(np.int64)
-    return Beams(np.concatenate(points), np.concatenate(variances), bounds)
+    point, lateral, ahead, shrink = (np.concatenate(parts) for parts in zip(*found, strict=True))
+    bounds = np.concatenate([[0], np.cumsum([len(hits[0]) for hits in found])]).astype(np.int64)
+    return Beams(point, lateral, bounds, ahead, shrink)
 
 
 def _by_label(label: IntArray, n: int) -> list[IntArray]:
@@ -409,11 +445,18 @@ def _claimed(
 
 
 def _member_hits(
-    data: DenseData, idx: IntArray, y_t: FloatArray, sight_t: FloatArray, lateral_var: FloatArray
-) -> tuple[IntArray, FloatArray] | None:
+    data: DenseData,
+    idx: IntArray,
+    y_t: FloatArray,
+    sight_t: FloatArray,
+    lateral_var: FloatArray,
+    range_var_m2: float,
+    depth: bool,
+) -> tuple[IntArray, FloatArray, FloatArray, FloatArray] | None:
     """The hits ``idx`` of one member that lie on its line (not seen end on, not another part's),
-    and each one's offset variance; None when they are no member (too few frames, too short, or
-    spread wider than ``MAX_SPREAD_M``)."""
+    the variances of each one's offsets across the line and (when ``depth``, else ``(0,)``)
+    along the sight, and the latter's shrinks (:func:`_shrinks`); None when they are no member (too
+    few frames, too short, or spread wider than ``MAX_SPREAD_M``)."""
     if len(np.unique(data.frame[idx])) < MIN_FRAMES:
         return None
     keep = np.ones(len(idx), dtype=bool)
@@ -424,26 +467,59 @@ def _member_hits(
         off = y_t[idx] - c - along[:, None] * d
         e = np.cross(d, sight_t[idx])
         sin = np.linalg.norm(e, axis=1)
-        r = np.einsum("ni,ni->n", e, off) / np.maximum(sin, 1e-12)
+        e /= np.maximum(sin, 1e-12)[:, None]
+        r = np.einsum("ni,ni->n", e, off)
+        ahead = np.einsum("ni,ni->n", np.cross(d, e), off)
         keep = sin >= np.sin(MIN_SIGHT_ANGLE)
         if not np.any(keep):
             return None
         scale = max(1.4826 * float(np.median(np.abs(r[keep]))), float(np.sqrt(np.median(lateral_var[idx]))))
+        ahead_mid = float(np.median(ahead[keep]))
+        ahead_scale = max(_robust_sigma(ahead[keep]), float(np.sqrt(range_var_m2)))
         keep &= np.abs(r) <= OUTLIER_SIGMAS * scale
+        if depth:
+            keep &= np.abs(ahead - ahead_mid) <= OUTLIER_SIGMAS * ahead_scale
     frame = data.frame[idx]
     if len(np.unique(frame[keep])) < MIN_FRAMES or np.ptp(along[keep]) < MIN_LENGTH_SURFELS * data.surfel_m:
         return None
     if np.sqrt(np.mean(np.sum(off[keep] ** 2, axis=1))) > MAX_SPREAD_M:
         return None
-    idx, r, frame, segment = idx[keep], r[keep], frame[keep], np.floor(along[keep] / data.surfel_m).astype(np.int64)
-    # The member's section as the pixels see it, per frame: the spread of its hits across it.
-    spread = np.full(len(idx), scale**2)
+    idx, frame = idx[keep], frame[keep]
+    segment = np.floor(along[keep] / data.surfel_m).astype(np.int64)
+    # The member's section as the pixels see it, per frame: the spread of its hits across it and
+    # along the sight, at least the sensor's noise.
+    lateral = np.maximum(_frame_spread(r[keep], frame, segment, scale**2), lateral_var[idx])
+    if not depth:
+        return idx, lateral, np.zeros(0), np.zeros(0)
+    ahead_var = np.maximum(_frame_spread(ahead[keep], frame, segment, ahead_scale**2), range_var_m2)
+    across = float(np.median([_robust_sigma(r[keep][frame == f]) for f in np.unique(frame)]))
+    return idx, lateral, ahead_var, _shrinks(frame, ahead_var, (DEPTH_WOBBLE * across) ** 2)
+
+
+def _shrinks(frame: IntArray, var_m2: FloatArray, common_m2: float) -> FloatArray:
+    """Per hit, the share ``c`` of its frame's mean to take off rows of variance ``var_m2`` (one per
+    frame) that share an error of variance ``common_m2`` within a frame: with ``n`` hits,
+    ``r - c mean(r)``, ``c = 1 - sqrt(v / (v + n common))``, are independent of variance ``v`` (the
+    inverse square root of ``v I + common 1 1^T``), so the frame's mean weighs as one measurement of
+    variance ``v / n + common`` and the hits' offsets from it keep their own weight."""
+    _, inverse, n = np.unique(frame, return_inverse=True, return_counts=True)
+    return np.asarray(1.0 - np.sqrt(var_m2 / (var_m2 + n[inverse] * common_m2)))
+
+
+def _robust_sigma(r: FloatArray) -> float:
+    """The spread of ``r`` from its median absolute deviation."""
+    return 1.4826 * float(np.median(np.abs(r - np.median(r))))
+
+
+def _frame_spread(r: FloatArray, frame: IntArray, segment: IntArray, fallback_m2: float) -> FloatArray:
+    """Per hit, the spread of the offsets ``r`` of its frame's hits (``fallback_m2`` for a frame
+    with few), at least what the hits of a segment hold together (:func:`_correlated`)."""
+    spread = np.full(len(r), fallback_m2)
     for f in np.unique(frame):
         on = frame == f
         if on.sum() >= MIN_LINE_POINTS:
-            spread[on] = (1.4826 * np.median(np.abs(r[on] - np.median(r[on])))) ** 2
-            spread[on] = np.maximum(spread[on], _correlated(r[on], segment[on]))
-    return idx, np.maximum(spread, lateral_var[idx])
+            spread[on] = max(_robust_sigma(r[on]) ** 2, _correlated(r[on], segment[on]))
+    return spread
 
 
 def _correlated(r: FloatArray, segment: IntArray) -> float:
@@ -462,34 +538,69 @@ def _correlated(r: FloatArray, segment: IntArray) -> float:
 def beam_rows(
     beams: Beams, data: DenseData, mapping: LineMapping, *, jacobian: bool = True
 ) -> tuple[FloatArray, FloatArray | None, FloatArray]:
-    """The offsets ``r`` ``(n,)`` (m) at the motion ``mapping``, each member's line fitted to its
-    hits at ``T`` and projected out; their Jacobian ``(n, free)`` (Kaufman's projection; ``e``
-    held), when asked; and the hits at ``T`` ``(n, 3)``."""
-    idx = beams.point
-    xyz, line = data.xyz_m[idx], data.line[idx]
+    """The offsets ``r`` (m) at the motion ``mapping``, one row per hit across its member's line and
+    its sight, then (``beams.depth``) one along its sight, with each member's line fitted to its
+    hits at ``T`` and projected out, and the depth its faces seen lie ahead of the line too; their
+    Jacobian ``(rows, free)`` (Kaufman's projection; the rows' directions held), when asked; and
+    the hits at ``T`` ``(n, 3)``. Rows in the order of :attr:`Beams.row_var_m2`."""
+    n, blocks = len(beams.point), 2 if beams.depth else 1
+    xyz, line = data.xyz_m[beams.point], data.line[beams.point]
     y = mapping.apply(xyz, line)
-    u = _sights(data, mapping, idx)
-    w = 1.0 / beams.var_m2
-    e = np.empty((len(idx), 3))
-    J_line = np.empty((len(idx), 4))
-    r = np.empty(len(idx))
+    u = _sights(data, mapping, beams.point)
+    w = 1.0 / beams.row_var_m2
+    direction = np.empty((blocks * n, 3))
+    J_line = np.zeros((blocks * n, 4 + blocks - 1))
+    r = np.empty(blocks * n)
+    rows = []
     for k in range(beams.members):
-        s = slice(beams.bounds[k], beams.bounds[k + 1])
+        s = np.arange(beams.bounds[k], beams.bounds[k + 1])
         c, d = _fit_line(y[s], w[s])
-        ek = np.cross(d, u[s])
-        ek /= np.maximum(np.linalg.norm(ek, axis=1, keepdims=True), 1e-12)
+        across = np.cross(d, u[s])
+        across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-12)
         E = np.stack(perpendiculars(d[None, :]), axis=1)[0]  # (2, 3): the line's offsets and tilts
-        ee = ek @ E.T
-        J_line[s] = -np.concatenate([ee, ((y[s] - c) @ d)[:, None] * ee], axis=1)
-        e[s], r[s] = ek, np.einsum("ni,ni->n", ek, y[s] - c)
-    J_x = mapping.normal_derivative(e, xyz, line) if jacobian else None
-    for k in range(beams.members):
-        s = slice(beams.bounds[k], beams.bounds[k + 1])
-        Jl = J_line[s]
-        Jw = Jl * w[s, None]
-        info = np.linalg.pinv(Jw.T @ Jl, rcond=1e-10, hermitian=True)
-        # Each row less the line's share of it: J_line (J_line^T W J_line)^+ J_line^T W.
-        r[s] -= Jl @ (info @ (Jw.T @ r[s]))
+        along = (y[s] - c) @ d
+        # Across the line and the sight; then ahead of the line, towards the sensor.
+        for block, v in enumerate([across, np.cross(d, across)][:blocks]):
+            at = block * n + s
+            ve = v @ E.T
+            J_line[at, :4] = -np.concatenate([ve, along[:, None] * ve], axis=1)
+            direction[at], r[at] = v, np.einsum("ni,ni->n", v, y[s] - c)
+        if beams.depth:
+            J_line[n + s, 4] = -1.0  # the depth of the faces seen ahead of the line
+        rows.append(np.concatenate([block * n + s for block in range(blocks)]))
+    J_x = None
+    if jacobian:
+        J_x = mapping.normal_derivative(direction, np.concatenate([xyz] * blocks), np.concatenate([line] * blocks))
+    if beams.depth:
+        # The depth rows of a member in a frame share the section's wobble: whitened (_shrinks).
+        shrink = _frame_shrink(beams, data)
+        r[n:] = shrink(r[n:])
+        J_line[n:] = shrink(J_line[n:])
         if J_x is not None:
-            J_x[s] -= Jl @ (info @ (Jw.T @ J_x[s]))
+            J_x[n:] = shrink(J_x[n:])
+    for at in rows:
+        Jl = J_line[at]
+        Jw = Jl * w[at, None]
+        info = np.linalg.pinv(Jw.T @ Jl, rcond=1e-10, hermitian=True)
+        # Each row less the nuisances' share of it: J_line (J_line^T W J_line)^+ J_line^T W.
+        r[at] -= Jl @ (info @ (Jw.T @ r[at]))
+        if J_x is not None:
+            J_x[at] -= Jl @ (info @ (Jw.T @ J_x[at]))
     return r, J_x, y
+
+
+def _frame_shrink(beams: Beams, data: DenseData) -> Callable[[FloatArray], FloatArray]:
+    """``a -> a - c mean(a)``, the mean over each member's hits in one frame and ``c`` the hits'
+    ``depth_shrink``, for arrays of one row per hit."""
+    member = np.repeat(np.arange(beams.members), np.diff(beams.bounds))
+    _, group, count = np.unique(
+        member * (int(data.frame.max()) + 1) + data.frame[beams.point], return_inverse=True, return_counts=True
+    )
+    S = coo_matrix((np.ones(len(group)), (group, np.arange(len(group)))), shape=(len(count), len(group))).tocsr()
+    c = beams.depth_shrink
+
+    def shrink(a: FloatArray) -> FloatArray:
+        mean = (S @ a) / (count[:, None] if a.ndim == 2 else count)
+        return a - (c[:, None] if a.ndim == 2 else c) * mean[group]
+
+    return shrink

@@ -108,7 +108,7 @@ class _Terms:
         r, J, _ = beam_rows(self.beams, problem.data, mapping)
         assert J is not None
         return Linearized(
-            np.concatenate([lin.r, r]), np.vstack([lin.J, J]), np.concatenate([lin.var, self.beams.var_m2])
+            np.concatenate([lin.r, r]), np.vstack([lin.J, J]), np.concatenate([lin.var, self.beams.row_var_m2])
         )
 
     def residuals(self, problem: _Problem, mapping: LineMapping) -> FloatArray:
@@ -125,7 +125,7 @@ class _Terms:
         if self.beams.members == 0:
             return anchors
         return np.vstack(
-            [anchors, mapping.apply(problem.data.xyz_m[self.beams.point], problem.data.line[self.beams.point])]
+            [anchors, mapping.apply(problem.data.xyz_m[self.beams.row_point], problem.data.line[self.beams.row_point])]
         )
 
 
