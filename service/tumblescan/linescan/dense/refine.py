@@ -286,10 +286,11 @@ def _iterate(
         taken = _damped_step(problem, z, H, g, lam, lin, scale, terms)
         if taken is None:
             break
-        dz, lam, mapping = taken
-        # A step far below the parameters' own uncertainty changes nothing that matters.
+        dz, lam, mapping, full = taken
+        # A Gauss-Newton step far below the parameters' own uncertainty changes nothing that
+        # matters (the step taken, damped, can be small far from the optimum).
         sd = scale * np.sqrt(np.diag(np.linalg.pinv(H, rcond=1e-12)))
-        moved = float(np.max(np.abs(dz) / np.maximum(sd, 1e-300)))
+        moved = float(np.max(np.abs(full) / np.maximum(sd, 1e-300)))
         z = z + dz
         step += 1
         if on_iteration is not None:
@@ -323,11 +324,15 @@ def _damped_step(
     lin: Linearized,
     scale: float,
     terms: _Terms,
-) -> tuple[FloatArray, float, LineMapping] | None:
+) -> tuple[FloatArray, float, LineMapping, FloatArray] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
-    last one) that lowers the Cauchy cost on these correspondences and members; None when none does."""
+    last one) that lowers the Cauchy cost on these correspondences and members, the next ``lam``,
+    and the Gauss-Newton step ``H^-1 g`` (what convergence is judged by: along a nearly degenerate
+    direction, spin and precession about nearly one axis, the damping leaves small steps far from
+    the optimum); None when no step lowers the cost."""
     data = problem.data
     before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
+    full = np.asarray(np.linalg.lstsq(H, g, rcond=None)[0], dtype=float)
     D = np.diag(np.diag(H))
     for _ in range(LM_TRIES):
         step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
@@ -337,7 +342,7 @@ def _damped_step(
         r = terms.residuals(problem, mapping)
         after = cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
-            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
+            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping, full
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
     return None
 

@@ -1,0 +1,30 @@
+"""The refinement's convergence on a nearly degenerate motion: spin and precession about axes 12 deg
+from opposite, so the rates' split is a direction of tiny curvature. Once Levenberg-Marquardt's
+damping (``lam diag H``) was on, it all but stopped the motion along that direction, and the small
+steps passed for convergence 10 bounds off the optimum; convergence is now judged by the
+Gauss-Newton step."""
+
+from __future__ import annotations
+
+import numpy as np
+from bench.linescan.dense import errors
+
+from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
+from tumblescan.linescan.frames import assemble_frames
+from tumblescan.target.shapes import LongArrayShape
+
+
+def test_a_nearly_degenerate_motion_is_refined_to_its_optimum() -> None:
+    """The real-shapes bench's long array at 100 m seed 5 (its hardest case): within the issue's
+    limits (0.1 deg, 0.05 deg/s) and 3 reported sigmas; before, 0.93 deg and 0.24 deg/s."""
+    motion = random_motion(np.random.default_rng(5), distance_m=100.0)
+    spin, precession = np.asarray(motion.spin_axis), np.asarray(motion.precession_axis)
+    assert np.degrees(np.arccos(abs(float(spin @ precession)))) < 15
+    scene = Scene(scanner=Scanner(lines=512, pixels=512), shape=LongArrayShape())
+    sim = simulate_frames(motion, scene, seed=5)
+    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+    e = errors(estimate_from_frames(frames), motion)
+    assert e["spin_axis_deg"] <= 0.1 and e["precession_axis_deg"] <= 0.1, e
+    assert e["spin_rate_deg_s"] <= 0.05 and e["precession_rate_deg_s"] <= 0.05, e
+    for p in ("spin_axis", "spin_rate", "precession_axis", "precession_rate"):
+        assert e[f"{p}_sigma"] <= 3, (p, e)
