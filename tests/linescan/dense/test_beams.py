@@ -73,7 +73,7 @@ def test_offsets_at_the_true_motion_are_noise_of_their_stated_variance() -> None
     """Across the line and along the sight, each hit's and each frame's (a member's hits in one
     frame share the depth its section's faces lie ahead of the line, as the view turns)."""
     *_, data, mapping, beams = _found("truss")
-    assert beams.depth
+    assert len(beams.depth_var_m2) == len(beams.depth_shrink) == len(beams.point)
     r, _, _ = beam_rows(beams, data, mapping, jacobian=False)
     n = len(beams.point)
     e = r / np.sqrt(beams.row_var_m2)

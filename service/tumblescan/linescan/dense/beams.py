@@ -105,9 +105,8 @@ class Beams:
     """The hits on members, grouped by member: ``point`` ``(n,)`` indices into the data's points,
     member by member; ``var_m2`` ``(n,)`` each offset's variance across the line (before the
     common scale); ``bounds`` ``(members + 1,)`` where each member's hits start in ``point``;
-    ``depth_var_m2`` ``(n,)`` the variance of each offset along the sight, or ``(0,)`` when
-    those rows are left out, and ``depth_shrink`` ``(n,)`` the share of its member's mean in its
-    frame taken off each of them (:func:`_shrinks`)."""
+    ``depth_var_m2`` ``(n,)`` the variance of each offset along the sight, and ``depth_shrink``
+    ``(n,)`` the share of its member's mean in its frame taken off each of them (:func:`_shrinks`)."""
 
     point: IntArray
     var_m2: FloatArray
@@ -120,19 +119,9 @@ class Beams:
         return len(self.bounds) - 1
 
     @property
-    def depth(self) -> bool:
-        """Whether each hit has a row along the sight too."""
-        return len(self.depth_var_m2) > 0
-
-    @property
     def row_var_m2(self) -> FloatArray:
         """The variance of each row of :func:`beam_rows`: across the lines, then along the sights."""
         return np.concatenate([self.var_m2, self.depth_var_m2])
-
-    @property
-    def row_point(self) -> IntArray:
-        """The hit of each row of :func:`beam_rows`."""
-        return np.concatenate([self.point, self.point[: len(self.depth_var_m2)]])
 
     @staticmethod
     def none() -> Beams:
@@ -315,11 +304,9 @@ def _sights(data: DenseData, mapping: LineMapping, idx: IntArray) -> FloatArray:
     return mapping.rotate(xyz / np.linalg.norm(xyz, axis=1, keepdims=True), data.line[idx])
 
 
-def find_beams(
-    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, *, depth: bool = True
-) -> Beams:
+def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise) -> Beams:
     """The members at the motion ``mapping`` (module docstring), from the points in no planar
-    surfel of ``surf``; with each hit's offset along the sight too when ``depth``."""
+    surfel of ``surf``."""
     free = ~surf.planar[surf.point_cell]
     # Only the free points are read below: the others' rows stay zero.
     idx = np.flatnonzero(free)
@@ -354,7 +341,7 @@ def find_beams(
     point_member = _claimed(y_t, free, lines, CLAIM_SURFELS * data.surfel_m)
     found = []
     for claimed in _by_label(point_member, len(lines)):
-        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var, noise.range_sigma_m**2, depth)
+        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var, noise.range_sigma_m**2)
         if hits is not None:
             found.append(hits)
     if not found:
@@ -451,11 +438,10 @@ def _member_hits(
     sight_t: FloatArray,
     lateral_var: FloatArray,
     range_var_m2: float,
-    depth: bool,
 ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray] | None:
     """The hits ``idx`` of one member that lie on its line (not seen end on, not another part's),
-    the variances of each one's offsets across the line and (when ``depth``, else ``(0,)``)
-    along the sight, and the latter's shrinks (:func:`_shrinks`); None when they are no member (too
+    the variances of each one's offsets across the line and along the sight, and the latter's
+    shrinks (:func:`_shrinks`); None when they are no member (too
     few frames, too short, or spread wider than ``MAX_SPREAD_M``)."""
     if len(np.unique(data.frame[idx])) < MIN_FRAMES:
         return None
@@ -477,8 +463,7 @@ def _member_hits(
         ahead_mid = float(np.median(ahead[keep]))
         ahead_scale = max(_robust_sigma(ahead[keep]), float(np.sqrt(range_var_m2)))
         keep &= np.abs(r) <= OUTLIER_SIGMAS * scale
-        if depth:
-            keep &= np.abs(ahead - ahead_mid) <= OUTLIER_SIGMAS * ahead_scale
+        keep &= np.abs(ahead - ahead_mid) <= OUTLIER_SIGMAS * ahead_scale
     frame = data.frame[idx]
     if len(np.unique(frame[keep])) < MIN_FRAMES or np.ptp(along[keep]) < MIN_LENGTH_SURFELS * data.surfel_m:
         return None
@@ -489,8 +474,6 @@ def _member_hits(
     # The member's section as the pixels see it, per frame: the spread of its hits across it and
     # along the sight, at least the sensor's noise.
     lateral = np.maximum(_frame_spread(r[keep], frame, segment, scale**2), lateral_var[idx])
-    if not depth:
-        return idx, lateral, np.zeros(0), np.zeros(0)
     ahead_var = np.maximum(_frame_spread(ahead[keep], frame, segment, ahead_scale**2), range_var_m2)
     across = float(np.median([_robust_sigma(r[keep][frame == f]) for f in np.unique(frame)]))
     return idx, lateral, ahead_var, _shrinks(frame, ahead_var, (DEPTH_WOBBLE * across) ** 2)
@@ -539,18 +522,18 @@ def beam_rows(
     beams: Beams, data: DenseData, mapping: LineMapping, *, jacobian: bool = True
 ) -> tuple[FloatArray, FloatArray | None, FloatArray]:
     """The offsets ``r`` (m) at the motion ``mapping``, one row per hit across its member's line and
-    its sight, then (``beams.depth``) one along its sight, with each member's line fitted to its
+    its sight, then one along its sight, with each member's line fitted to its
     hits at ``T`` and projected out, and the depth its faces seen lie ahead of the line too; their
     Jacobian ``(rows, free)`` (Kaufman's projection; the rows' directions held), when asked; and
     the hits at ``T`` ``(n, 3)``. Rows in the order of :attr:`Beams.row_var_m2`."""
-    n, blocks = len(beams.point), 2 if beams.depth else 1
+    n = len(beams.point)
     xyz, line = data.xyz_m[beams.point], data.line[beams.point]
     y = mapping.apply(xyz, line)
     u = _sights(data, mapping, beams.point)
     w = 1.0 / beams.row_var_m2
-    direction = np.empty((blocks * n, 3))
-    J_line = np.zeros((blocks * n, 4 + blocks - 1))
-    r = np.empty(blocks * n)
+    direction = np.empty((2 * n, 3))
+    J_line = np.zeros((2 * n, 5))
+    r = np.empty(2 * n)
     rows = []
     for k in range(beams.members):
         s = np.arange(beams.bounds[k], beams.bounds[k + 1])
@@ -560,24 +543,22 @@ def beam_rows(
         E = np.stack(perpendiculars(d[None, :]), axis=1)[0]  # (2, 3): the line's offsets and tilts
         along = (y[s] - c) @ d
         # Across the line and the sight; then ahead of the line, towards the sensor.
-        for block, v in enumerate([across, np.cross(d, across)][:blocks]):
+        for block, v in enumerate([across, np.cross(d, across)]):
             at = block * n + s
             ve = v @ E.T
             J_line[at, :4] = -np.concatenate([ve, along[:, None] * ve], axis=1)
             direction[at], r[at] = v, np.einsum("ni,ni->n", v, y[s] - c)
-        if beams.depth:
-            J_line[n + s, 4] = -1.0  # the depth of the faces seen ahead of the line
-        rows.append(np.concatenate([block * n + s for block in range(blocks)]))
+        J_line[n + s, 4] = -1.0  # the depth of the faces seen ahead of the line
+        rows.append(np.concatenate([s, n + s]))
     J_x = None
     if jacobian:
-        J_x = mapping.normal_derivative(direction, np.concatenate([xyz] * blocks), np.concatenate([line] * blocks))
-    if beams.depth:
-        # The depth rows of a member in a frame share the section's wobble: whitened (_shrinks).
-        shrink = _frame_shrink(beams, data)
-        r[n:] = shrink(r[n:])
-        J_line[n:] = shrink(J_line[n:])
-        if J_x is not None:
-            J_x[n:] = shrink(J_x[n:])
+        J_x = mapping.normal_derivative(direction, np.concatenate([xyz, xyz]), np.concatenate([line, line]))
+    # The depth rows of a member in a frame share the section's wobble: whitened (_shrinks).
+    shrink = _frame_shrink(beams, data)
+    r[n:] = shrink(r[n:])
+    J_line[n:] = shrink(J_line[n:])
+    if J_x is not None:
+        J_x[n:] = shrink(J_x[n:])
     for at in rows:
         Jl = J_line[at]
         Jw = Jl * w[at, None]

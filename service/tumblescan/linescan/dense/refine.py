@@ -124,9 +124,8 @@ class _Terms:
         anchors = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
         if self.beams.members == 0:
             return anchors
-        return np.vstack(
-            [anchors, mapping.apply(problem.data.xyz_m[self.beams.row_point], problem.data.line[self.beams.row_point])]
-        )
+        hits = mapping.apply(problem.data.xyz_m[self.beams.point], problem.data.line[self.beams.point])
+        return np.vstack([anchors, hits, hits])  # a row across, then one along the sight, per hit
 
 
 @dataclass
@@ -286,9 +285,11 @@ def _iterate(
         taken = _damped_step(problem, z, H, g, lam, lin, scale, terms)
         if taken is None:
             break
-        dz, lam, mapping, full = taken
+        dz, lam, mapping = taken
         # A Gauss-Newton step far below the parameters' own uncertainty changes nothing that
-        # matters (the step taken, damped, can be small far from the optimum).
+        # matters. Not the step taken: along a nearly degenerate direction (spin and precession
+        # about nearly one axis) the damping leaves small steps far from the optimum.
+        full = np.linalg.lstsq(H, g, rcond=None)[0]
         sd = scale * np.sqrt(np.diag(np.linalg.pinv(H, rcond=1e-12)))
         moved = float(np.max(np.abs(full) / np.maximum(sd, 1e-300)))
         z = z + dz
@@ -324,15 +325,11 @@ def _damped_step(
     lin: Linearized,
     scale: float,
     terms: _Terms,
-) -> tuple[FloatArray, float, LineMapping, FloatArray] | None:
+) -> tuple[FloatArray, float, LineMapping] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
-    last one) that lowers the Cauchy cost on these correspondences and members, the next ``lam``,
-    and the Gauss-Newton step ``H^-1 g`` (what convergence is judged by: along a nearly degenerate
-    direction, spin and precession about nearly one axis, the damping leaves small steps far from
-    the optimum); None when no step lowers the cost."""
+    last one) that lowers the Cauchy cost on these correspondences and members; None when none does."""
     data = problem.data
     before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
-    full = np.asarray(np.linalg.lstsq(H, g, rcond=None)[0], dtype=float)
     D = np.diag(np.diag(H))
     for _ in range(LM_TRIES):
         step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
@@ -342,7 +339,7 @@ def _damped_step(
         r = terms.residuals(problem, mapping)
         after = cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
-            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping, full
+            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
     return None
 
