@@ -19,9 +19,10 @@ import numpy as np
 
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import cauchy_curvature, patches, sandwich
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, weights
 from tumblescan.linescan.dense.refine import refine_dense
-from tumblescan.linescan.dense.surfels import LineMapping, build_surfels
+from tumblescan.linescan.dense.surfels import build_surfels
 from tumblescan.target import shapes as shapes_mod
 
 from ..common import table

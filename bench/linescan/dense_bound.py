@@ -41,10 +41,12 @@ from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
 from tumblescan.geometry.rotations import axis_from_angles
+from tumblescan.linescan.dense.data import DenseData, prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import Linearized, Matches, linearize, match
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels, normal_variance, prepare
+from tumblescan.linescan.dense.surfels import Surfels, build_surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad

@@ -42,20 +42,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
-from tumblescan.linescan.dense.beams import _line_shape, _moments
+from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData, prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS, flat_cells
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.members import _line_shape, _moments
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import (
-    MAX_RANGE_STEP,
-    DenseData,
-    LineMapping,
-    _cell_moments,
-    _noise_free_normals,
-    build_surfels,
-    normal_variance,
-    prepare,
-)
+from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, build_surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.target.motion import apply_rotation
@@ -331,22 +324,22 @@ def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> li
 
 
 def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: list[float]) -> list[list[object]]:
-    """The interior test's range step (``surfels.MAX_RANGE_STEP``, in cells) at other values: the
+    """The interior test's range step (``data.MAX_RANGE_STEP``, in cells) at other values: the
     share of hits in planar surfels at the true motion, their bound over the bound of all hits,
     and the share of them not on their surfel's main face (the bias the test is there to stop).
     (The branch ``wip-ls-line``'s commit 2abf78b adds ``4p``: the step and a test of the
     neighbours on the cell's plane; docs/linescan.md.)"""
-    from tumblescan.linescan.dense import surfels
+    from tumblescan.linescan.dense import data as data_module
 
     motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
     noise = scene.scanner.noise
     faces = face_of_hits(scene, motion, sim.reference_m)
     b_all = dense_bound(motion, scene, sim, T, faces=faces)
     rows: list[list[object]] = []
-    default = surfels.MAX_RANGE_STEP
+    default = data_module.MAX_RANGE_STEP
     try:
         for step in steps:
-            surfels.MAX_RANGE_STEP = step
+            data_module.MAX_RANGE_STEP = step
             data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
                            range_sigma_m=noise.range_sigma_m)  # fmt: skip
             mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
@@ -365,7 +358,7 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
             rows.append([name, seed, f"{step:g}", f"{100 * used.mean():.1f}", f"{100 * other:.2f}",
                          *[f"{b[p] / b_all[p]:.2f}" for p in PARAMS]])  # fmt: skip
     finally:
-        surfels.MAX_RANGE_STEP = default
+        data_module.MAX_RANGE_STEP = default
     return rows
 
 

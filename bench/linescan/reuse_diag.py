@@ -26,8 +26,10 @@ import numpy as np
 
 from tumblescan import Motion, Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import patches, sandwich
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
-from tumblescan.linescan.dense.surfels import DenseData, LineMapping, Surfels, build_surfels
+from tumblescan.linescan.dense.surfels import Surfels, build_surfels
 from tumblescan.linescan.sensor import SensorNoise
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import canonical_cov

@@ -33,9 +33,9 @@ from tumblescan.geometry.rotations import axis_from_angles
 from tumblescan.linescan.dense import covariance as covariance_mod
 from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
+from tumblescan.linescan.dense.data import prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import prepare
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.linescan.validation import canonical_cov
 from tumblescan.target.motion import N_PARAMS, canonical_params

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from tumblescan import Motion, Scene, simulate_frames
+from tumblescan.linescan.dense.data import DenseData, prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import DenseData, LineMapping, prepare
 from tumblescan.linescan.simulate import FrameCloud
 
 

@@ -9,9 +9,11 @@ from bench.linescan.dense_bound import dense_bound, face_of_hits, fitted_hits
 from bench.linescan.line_potential import beam_of_hits, classify, line_information, line_rows
 
 from tumblescan import Motion, Scanner, Scene, simulate_frames
+from tumblescan.linescan.dense.data import prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import LineMapping, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import build_surfels
 from tumblescan.linescan.sensor import perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.target.shape import SatelliteShape

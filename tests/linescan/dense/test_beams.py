@@ -10,10 +10,13 @@ from bench.linescan.dense import errors
 from bench.linescan.line_potential import beam_of_hits
 
 from tumblescan import FramesOptions, Motion, Scanner, Scene, TimedCloud, estimate_from_frames, simulate_frames
-from tumblescan.linescan.dense.beams import Beams, _fit_line, _frame_shrink, _shrinks, _sights, beam_rows, find_beams
+from tumblescan.linescan.dense.beams import Beams, _frame_shrink, _shrinks, beam_rows, find_beams
+from tumblescan.linescan.dense.data import DenseData, prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.members import fit_line, sights
 from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import DenseData, LineMapping, build_surfels, prepare
+from tumblescan.linescan.dense.surfels import build_surfels
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.linescan.options import DenseConfig
 from tumblescan.linescan.sensor import perpendiculars
@@ -113,11 +116,11 @@ def test_rows_are_free_of_each_members_line() -> None:
     assert J is not None
     n = len(beams.point)
     w = 1.0 / beams.row_var_m2
-    u = _sights(data, mapping, beams.point)
+    u = sights(data, mapping, beams.point)
     J_line = np.zeros((2 * n, 5))
     for k in range(beams.members):
         s = np.arange(beams.bounds[k], beams.bounds[k + 1])
-        c, d = _fit_line(y[s], w[s])
+        c, d = fit_line(y[s], w[s])
         e = np.cross(d, u[s])
         e /= np.linalg.norm(e, axis=1, keepdims=True)
         E = np.stack(perpendiculars(d[None, :]), axis=1)[0]

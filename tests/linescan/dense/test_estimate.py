@@ -33,7 +33,7 @@ from tumblescan import (
     write_ply,
 )
 from tumblescan.errors import InputError
-from tumblescan.linescan.dense.surfels import prepare
+from tumblescan.linescan.dense.data import prepare
 
 from ...live import serve
 

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tumblescan.linescan.dense import surfels as surfels_module
+from tumblescan.linescan.dense import mapping as mapping_module
 from tumblescan.linescan.dense.consensus import pair_misfits
-from tumblescan.linescan.dense.surfels import LineMapping, _cell_moments, _rotations_T, prepare
+from tumblescan.linescan.dense.data import prepare
+from tumblescan.linescan.dense.mapping import LineMapping, _rotations_T
+from tumblescan.linescan.dense.surfels import _cell_moments
 from tumblescan.target.motion import rotation_matrices
 
 X = np.array([0.3, 1.1, 0.4, -2.0, 0.7, 0.05, 0.2, -0.1, 50.0])
@@ -56,7 +58,7 @@ def test_points_mapped_in_chunks_equal_the_gathered_rotations(monkeypatch: pytes
     c = mapping.center
     expected = c + np.einsum("nij,nj->ni", mapping.Rt[data.line], xyz - c)
     whole = mapping.apply(data.xyz_m, data.line)
-    monkeypatch.setattr(surfels_module, "APPLY_CHUNK", 777)  # many chunks, the last one short
+    monkeypatch.setattr(mapping_module, "APPLY_CHUNK", 777)  # many chunks, the last one short
     chunked = mapping.apply(data.xyz_m, data.line)
     np.testing.assert_array_equal(chunked, whole)
     np.testing.assert_allclose(whole, expected, rtol=0, atol=1e-12)
@@ -72,13 +74,13 @@ def test_derivatives_without_the_centre_probes_equal_all_probes(free: tuple[int,
     tau = np.linspace(0.0, 30.0, 500)
     mapping = LineMapping(X, tau, free)
     probes = np.tile(X.astype(complex), (len(free), 1))
-    probes[np.arange(len(free)), list(free)] += 1j * surfels_module.STEP
-    every = _rotations_T(probes, tau).imag / surfels_module.STEP
+    probes[np.arange(len(free)), list(free)] += 1j * mapping_module.STEP
+    every = _rotations_T(probes, tau).imag / mapping_module.STEP
     expected = np.ascontiguousarray(every.transpose(1, 2, 3, 0).reshape(len(tau), 9, len(free)))
     np.testing.assert_array_equal(mapping.dRt, expected)
     # Each point's derivative along a normal, in chunks, as one pass over all rows gives it.
     rng = np.random.default_rng(4)
-    n_rows = 3 * surfels_module.DERIVATIVE_CHUNK + 5
+    n_rows = 3 * mapping_module.DERIVATIVE_CHUNK + 5
     line = rng.integers(0, len(tau), n_rows)
     n = rng.normal(size=(n_rows, 3))
     xyz = rng.normal(size=(n_rows, 3)) + X[6:9]

@@ -7,15 +7,10 @@ import numpy as np
 import pytest
 
 from tumblescan.linescan.dense import surfels as surfels_module
+from tumblescan.linescan.dense.data import SPURIOUS_MIN_SHARE, DenseData, prepare
 from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
-from tumblescan.linescan.dense.surfels import (
-    SPURIOUS_MIN_SHARE,
-    DenseData,
-    LineMapping,
-    Surfels,
-    build_surfels,
-    prepare,
-)
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.surfels import Surfels, build_surfels
 from tumblescan.linescan.sensor import SensorNoise
 
 NOISE = SensorNoise()  # Table 1: 2 cm along the line of sight, 36 arcsec across it

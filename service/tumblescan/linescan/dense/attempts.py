@@ -21,12 +21,12 @@ from ..options import FramesOptions
 from ..sensor import SensorNoise
 from ..validation import Similarity, similarity
 from .consensus import INLIER_RAD, pair_misfit, without_precession
+from .data import DenseData
 from .degeneracy import precession_p_value
 from .refine import DenseFit, refine_dense
 from .registration import PairTransforms, register_consecutive
 from .search import OverlapCost, swarm_start
 from .starts import Start, consensus_start, registration_start, retimed, same_basin, vote
-from .surfels import DenseData
 
 RETIME_PASSES = 2
 # A refined motion whose residuals are this many times their model sigma is wrong.

@@ -31,10 +31,10 @@ whitened for it (:func:`_shrinks`). The line and ``b`` are nuisances (two offset
 depth), eliminated per member: the rows are projected off their five directions (variable
 projection, Kaufman's Jacobian).
 
-Members are found at the current motion (:func:`find_beams`): strips (a cell's free points,
-split where their ranges jump, along one direction) with no planar cell beside them, joined
-across frames where they lie on one line at ``T``; a group counts as a member when at least ``MIN_FRAMES`` frames see
-it, it is ``MIN_LENGTH_SURFELS`` surfels long and its hits keep within ``MAX_SPREAD_M`` of the line.
+Members, and the free hits each one claims, are found at the current motion
+(:func:`.members.find_members`); here a member keeps the hits that lie on its line (within
+``OUTLIER_SIGMAS`` of it, not seen end on) when it is still seen in ``MIN_FRAMES`` frames over
+``MIN_LENGTH_SURFELS`` surfels and they keep within ``MAX_SPREAD_M`` of the line.
 """
 
 from __future__ import annotations
@@ -43,51 +43,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
 from ..sensor import SensorNoise, perpendiculars
-from .surfels import MAX_RANGE_STEP, DenseData, LineMapping, Surfels
+from .data import DenseData
+from .mapping import LineMapping
+from .members import MIN_FRAMES, MIN_LENGTH_SURFELS, MIN_LINE_POINTS, by_label, find_members, fit_line, sights
+from .surfels import Surfels
 
-# A strip: the scatter (less the range noise along the sight) has a largest eigenvalue this many
-# times the middle one, from at least this many points.
-LINE_RATIO = 3.0
-MIN_LINE_POINTS = 4
-# Strips of two frames are one member's when their centres at T lie within LINK_SURFELS surfels,
-# their directions within LINK_MAX_ANGLE and each centre within LINK_SURFELS_ACROSS surfels of the
-# other's line.
-LINK_SURFELS = 2.5
-LINK_MAX_ANGLE = np.radians(15.0)
-LINK_SURFELS_ACROSS = 0.5
-# A member's strips: centres within MEMBER_SURFELS_ACROSS surfels of its line, directions within
-# MEMBER_MAX_ANGLE; the best of MAX_SEEDS strips seeds each line, until MAX_IDLE_ROUNDS rounds in a
-# row find none.
-MEMBER_SURFELS_ACROSS = 0.5
-MEMBER_MAX_ANGLE = np.radians(30.0)
-MAX_SEEDS = 40
-MAX_IDLE_ROUNDS = 5
-GROW_REACH_SURFELS = (2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
-# A member: seen in this many frames, this long, its hits this close to its line (RMS, m).
-MIN_FRAMES = 3
-MIN_LENGTH_SURFELS = 4.0
+# A member's hits keep within this RMS distance of its line (m).
 MAX_SPREAD_M = 0.08
-# A cell's free points are split into pieces where their ranges jump by more than this many range
-# sigmas or this share of a surfel, whichever is more.
-PIECE_GAP_SIGMAS = 5.0
-PIECE_GAP_SURFELS = 0.5
-# Members on one line (parallel within MERGE_MAX_ANGLE, each centre within MERGE_SURFELS surfels of
-# the other's line) are one.
-MERGE_MAX_ANGLE = np.radians(10.0)
-MERGE_SURFELS = 1.0
-# A line with a planar surfel within BESIDE_PLANE_SURFELS surfels along more than MAX_BESIDE_PLANE of
-# its length is a plate's rim, not a member.
-BESIDE_PLANE_SURFELS = 1.5
-MAX_BESIDE_PLANE = 0.6
-# A member's line claims every free hit within this many surfels of it.
-CLAIM_SURFELS = 1.0
 # A hit whose sight runs within this angle of the member says little across it (seen end on).
 MIN_SIGHT_ANGLE = np.radians(30.0)
 # Segments (a surfel long) of one frame's hits of a member needed to measure how their offsets err together.
@@ -129,315 +95,24 @@ class Beams:
         return Beams(empty, np.zeros(0), np.zeros(1, dtype=np.int64), np.zeros(0), np.zeros(0))
 
 
-def _moments(cell: IntArray, y: FloatArray, m: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Per cell: count ``(m,)``, sum ``(m, 3)``, sum of outer products ``(m, 3, 3)`` of the rows ``y``."""
-    count = np.bincount(cell, minlength=m).astype(float)
-    s1 = np.stack([np.bincount(cell, y[:, i], minlength=m) for i in range(3)], axis=1).astype(float)
-    s2 = np.empty((m, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            s2[:, i, j] = s2[:, j, i] = np.bincount(cell, y[:, i] * y[:, j], minlength=m)
-    return count, s1, s2
-
-
-def _line_shape(
-    count: FloatArray,
-    s1: FloatArray,
-    s2: FloatArray,
-    sight_t: FloatArray,
-    range_var_m2: float,
-    *,
-    ratio: float = LINE_RATIO,
-    min_points: int = MIN_LINE_POINTS,
-) -> tuple[NDArray[np.bool_], FloatArray]:
-    """Whether the moments' scatter, less the range noise along ``sight_t`` (unit, at ``T``), has one
-    dominant direction (its variance ``ratio`` times the next, from ``min_points``), and that
-    direction ``(m, 3)``."""
-    safe = np.maximum(count, 1)
-    mean = s1 / safe[:, None]
-    cov = s2 / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    cov -= range_var_m2 * sight_t[:, :, None] * sight_t[:, None, :]
-    w, V = np.linalg.eigh(cov)
-    line = (count >= min_points) & (np.maximum(w[:, 1], 0.0) * ratio <= w[:, 2])
-    return np.asarray(line), np.asarray(V[:, :, 2])
-
-
-def range_pieces(data: DenseData, free: NDArray[np.bool_], gap_m: float) -> IntArray:
-    """Each free point's piece ``(n,)`` (``-1`` for the others): its cell's free points split where
-    their ranges, in order, jump by more than ``gap_m``. A cell of the view holds whatever lies
-    along its rays: the front and back members of a truss, a wire before a panel."""
-    idx = np.flatnonzero(free)
-    rho = np.linalg.norm(data.xyz_m[idx], axis=1)
-    order = np.lexsort((rho, data.cell[idx]))
-    cell, rho = data.cell[idx][order], rho[order]
-    new = np.ones(len(idx), dtype=bool)
-    new[1:] = (cell[1:] != cell[:-1]) | (np.diff(rho) > gap_m)
-    piece = np.full(len(free), -1, dtype=np.int64)
-    piece[idx[order]] = np.cumsum(new) - 1
-    return piece
-
-
-def strip_pieces(
-    data: DenseData,
-    y_t: FloatArray,
-    sight_t: FloatArray,
-    planar: NDArray[np.bool_],
-    piece: IntArray,
-    noise: SensorNoise,
-) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, IntArray]:
-    """Pieces (:func:`range_pieces`) whose points form a strip, with no planar cell beside them at
-    a similar range (a plate's strip along its outline has its plate there; a member has none):
-    the mask ``(k,)``, each piece's direction ``(k, 3)`` and centre at ``T`` ``(k, 3)``, and its frame
-    ``(k,)``. ``y_t``: every point at ``T``; ``sight_t``: its line of sight at ``T``."""
-    k = int(piece.max(initial=-1)) + 1
-    on = piece >= 0
-    count, s1, s2 = _moments(piece[on], y_t[on], k)
-    sight = np.stack([np.bincount(piece[on], sight_t[on, i], minlength=k) for i in range(3)], axis=1).astype(float)
-    sight /= np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-300)
-    line, direction = _line_shape(count, s1, s2, sight, noise.range_sigma_m**2)
-    # Each piece's cell and range; the cells' ranges (over all their points).
-    first = np.zeros(k, dtype=np.int64)
-    first[piece[on]] = np.flatnonzero(on)
-    cell = data.cell[first]
-    rho = np.bincount(piece[on], np.linalg.norm(data.xyz_m[on], axis=1), minlength=k) / np.maximum(count, 1)
-    m = len(data.cell_frame)
-    cell_rho = np.bincount(data.cell, np.linalg.norm(data.xyz_m, axis=1), minlength=m) / np.maximum(
-        np.bincount(data.cell, minlength=m), 1
-    )
-    beside_plane = np.zeros(k, dtype=bool)
-    for j in range(data.neighbours.shape[1]):
-        nb = data.neighbours[cell, j]
-        near = (nb >= 0) & (np.abs(cell_rho[np.maximum(nb, 0)] - rho) <= MAX_RANGE_STEP * data.surfel_m)
-        beside_plane |= near & planar[np.maximum(nb, 0)]
-    strip = line & ~beside_plane & ~planar[cell]
-    return np.asarray(strip), direction, np.asarray(s1 / np.maximum(count, 1)[:, None]), data.cell_frame[cell]
-
-
-def _linked_groups(centre: FloatArray, direction: FloatArray, surfel_m: float) -> IntArray:
-    """Group of each strip: strips joined, loosely, where they could lie on one line (``LINK_*``);
-    a group may hold several members that meet (a node of a truss), split by :func:`_members`."""
-    n = len(centre)
-    if n == 0:
-        return np.zeros(0, dtype=np.int64)
-    pairs = cKDTree(centre).query_pairs(LINK_SURFELS * surfel_m, output_type="ndarray")
-    a, b = pairs[:, 0], pairs[:, 1]
-    aligned = np.abs(np.einsum("ni,ni->n", direction[a], direction[b])) >= np.cos(LINK_MAX_ANGLE)
-    gap = centre[b] - centre[a]
-    across = LINK_SURFELS_ACROSS * surfel_m
-    for d in (direction[a], direction[b]):
-        along = np.einsum("ni,ni->n", gap, d)
-        aligned &= np.einsum("ni,ni->n", gap, gap) - along**2 <= across**2
-    graph = coo_matrix((np.ones(int(aligned.sum())), (a[aligned], b[aligned])), shape=(n, n))
-    return np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
-
-
-def _support(
-    centre: FloatArray, direction: FloatArray, c: FloatArray, d: FloatArray, across_m: float
-) -> NDArray[np.bool_]:
-    """Strips on the line ``c + s d``: centre within ``across_m`` of it, direction within ``MEMBER_MAX_ANGLE``."""
-    gap = centre - c
-    along = gap @ d
-    near = np.einsum("ni,ni->n", gap, gap) - along**2 <= across_m**2
-    return np.asarray(near & (np.abs(direction @ d) >= np.cos(MEMBER_MAX_ANGLE)))
-
-
-def _grown(
-    seed: int, centre: FloatArray, direction: FloatArray, weight: FloatArray, across_m: float, surfel_m: float
-) -> tuple[FloatArray, FloatArray]:
-    """The line through strip ``seed``, grown along itself: its strips within a reach that doubles,
-    the line fitted to their centres each time (one strip's direction is a few degrees off; over
-    a few metres the centres fix it)."""
-    c, d = centre[seed], direction[seed]
-    for reach in GROW_REACH_SURFELS:
-        on = _support(centre, direction, c, d, across_m) & (np.abs((centre - c) @ d) <= reach * surfel_m)
-        if on.sum() < 2:
-            break
-        c, d = _fit_line(centre[on], weight[on])
-    return c, d
-
-
-def _members(
-    centre: FloatArray, direction: FloatArray, weight: FloatArray, frame: IntArray, surfel_m: float, across_m: float
-) -> list[IntArray]:
-    """The lines in one group of strips, best supported first (sequential: the best of up to
-    ``MAX_SEEDS`` grown lines, its strips taken out, again): each a list of strip indices seen in
-    ``MIN_FRAMES`` frames and at least ``MIN_LENGTH_SURFELS`` surfels long."""
-    left = np.arange(len(centre))
-    untried = left.copy()
-    out: list[IntArray] = []
-    rng = np.random.default_rng(0)
-    idle = 0  # rounds in a row without a member: a large group of strips that are no members
-    while len(left) >= MIN_FRAMES and len(untried) and idle < MAX_IDLE_ROUNDS:
-        seeds = untried if len(untried) <= MAX_SEEDS else rng.choice(untried, MAX_SEEDS, replace=False)
-        untried = np.setdiff1d(untried, seeds)
-        best, best_weight = np.zeros(0, dtype=np.int64), 0.0
-        for i in seeds:
-            c, d = _grown(
-                int(np.searchsorted(left, i)), centre[left], direction[left], weight[left], across_m, surfel_m
-            )
-            on = left[_support(centre[left], direction[left], c, d, across_m)]
-            if len(np.unique(frame[on])) >= MIN_FRAMES and weight[on].sum() > best_weight:
-                along = (centre[on] - c) @ d
-                if np.ptp(along) >= MIN_LENGTH_SURFELS * surfel_m:
-                    best, best_weight = on, float(weight[on].sum())
-        idle = 0 if len(best) else idle + 1
-        if len(best):
-            out.append(best)
-            left = np.setdiff1d(left, best)
-            untried = np.setdiff1d(untried, best)
-    return out
-
-
-def _fit_line(y: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Weighted centre and direction (largest axis of the weighted scatter) of the rows ``y``."""
-    c = (w[:, None] * y).sum(axis=0) / w.sum()
-    v = y - c
-    scatter = (w[:, None] * v).T @ v
-    d = np.linalg.eigh(scatter)[1][:, 2]
-    # One sign for the same line, whatever the eigensolver returns (the offsets' signs follow it).
-    return c, d if d[np.argmax(np.abs(d))] > 0 else -d
-
-
-def _sights(data: DenseData, mapping: LineMapping, idx: IntArray) -> FloatArray:
-    """Unit lines of sight of the points ``idx`` turned to ``T``."""
-    xyz = data.xyz_m[idx]
-    return mapping.rotate(xyz / np.linalg.norm(xyz, axis=1, keepdims=True), data.line[idx])
-
-
 def find_beams(data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise) -> Beams:
-    """The members at the motion ``mapping`` (module docstring), from the points in no planar
-    surfel of ``surf``."""
-    free = ~surf.planar[surf.point_cell]
-    # Only the free points are read below: the others' rows stay zero.
-    idx = np.flatnonzero(free)
-    y_t, sight_t = np.zeros((len(free), 3)), np.zeros((len(free), 3))
-    y_t[idx] = mapping.apply(data.xyz_m[idx], data.line[idx])
-    sight_t[idx] = _sights(data, mapping, idx)
-    piece = range_pieces(data, free, max(PIECE_GAP_SIGMAS * noise.range_sigma_m, PIECE_GAP_SURFELS * data.surfel_m))
-    strip, direction, centre, frame = strip_pieces(data, y_t, sight_t, surf.planar, piece, noise)
-    pieces = np.flatnonzero(strip)
-    group = _linked_groups(centre[pieces], direction[pieces], data.surfel_m)
-    count = np.bincount(piece[piece >= 0], minlength=len(strip)).astype(float)
-    lateral_var = np.zeros(len(free))
-    lateral_var[idx] = (noise.angle_sigma_rad * np.linalg.norm(data.xyz_m[idx], axis=1)) ** 2
-    across_m = MEMBER_SURFELS_ACROSS * data.surfel_m
-    members: list[IntArray] = []
-    for in_group in _by_label(group, int(group.max(initial=-1)) + 1):
-        mine = pieces[in_group]
-        if len(np.unique(frame[mine])) < MIN_FRAMES:
-            continue
-        members += [
-            mine[on]
-            for on in _members(centre[mine], direction[mine], count[mine], frame[mine], data.surfel_m, across_m)
-        ]
-    lines = []
-    for on in _merged(members, centre, direction, count, MERGE_SURFELS * data.surfel_m):
-        c, d = _fit_line(centre[on], count[on])
-        along = (centre[on] - c) @ d
-        lines.append((c, d, along.min() - data.surfel_m, along.max() + data.surfel_m))
-    lines = _clear_of_planes(lines, surf, mapping, data.surfel_m)
-    # Every free hit near a member's line is its (the pieces too short or too mixed for a strip
-    # of their own too), the nearest member's where two are near.
-    point_member = _claimed(y_t, free, lines, CLAIM_SURFELS * data.surfel_m)
-    found = []
-    for claimed in _by_label(point_member, len(lines)):
-        hits = _member_hits(data, claimed, y_t, sight_t, lateral_var, noise.range_sigma_m**2)
-        if hits is not None:
-            found.append(hits)
-    if not found:
+    """The members at the motion ``mapping`` (:func:`.members.find_members`), each with the hits
+    that lie on its line and their variances (module docstring)."""
+    found = find_members(data, mapping, surf, noise)
+    hits = []
+    for claimed in by_label(found.point_member, found.count):
+        one = _member_hits(data, claimed, found.y_t, found.sight_t, noise)
+        if one is not None:
+            hits.append(one)
+    if not hits:
         return Beams.none()
-    point, lateral, ahead, shrink = (np.concatenate(parts) for parts in zip(*found, strict=True))
-    bounds = np.concatenate([[0], np.cumsum([len(hits[0]) for hits in found])]).astype(np.int64)
+    point, lateral, ahead, shrink = (np.concatenate(parts) for parts in zip(*hits, strict=True))
+    bounds = np.concatenate([[0], np.cumsum([len(one[0]) for one in hits])]).astype(np.int64)
     return Beams(point, lateral, bounds, ahead, shrink)
 
 
-def _by_label(label: IntArray, n: int) -> list[IntArray]:
-    """The indices of each label ``0 .. n-1`` in ``label`` (others, such as ``-1``, left out), in order."""
-    order = np.argsort(label, kind="stable")
-    starts = np.searchsorted(label[order], np.arange(n + 1))
-    return [order[starts[k] : starts[k + 1]] for k in range(n)]
-
-
-def _merged(
-    members: list[IntArray], centre: FloatArray, direction: FloatArray, weight: FloatArray, near_m: float
-) -> list[IntArray]:
-    """The members' strips, with the members on one line joined: parallel within ``MERGE_MAX_ANGLE``,
-    each one's centre within ``near_m`` of the other's line. A boom wider than a strip's scatter comes
-    apart in two groups (the faces seen lean its strips to one side, then the other); split between
-    two lines, each line's hits would lie on one side of it."""
-    lines = [_fit_line(centre[on], weight[on]) for on in members]
-    parent = list(range(len(members)))
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            i = parent[i]
-        return i
-
-    for i, (ci, di) in enumerate(lines):
-        for j in range(i + 1, len(lines)):
-            cj, dj = lines[j]
-            if abs(di @ dj) < np.cos(MERGE_MAX_ANGLE):
-                continue
-            gap = cj - ci
-            if all(gap @ gap - (gap @ d) ** 2 <= near_m**2 for d in (di, dj)):
-                parent[root(j)] = root(i)
-    groups: dict[int, list[IntArray]] = {}
-    for i, on in enumerate(members):
-        groups.setdefault(root(i), []).append(on)
-    return [np.concatenate(g) for g in groups.values()]
-
-
-def _clear_of_planes(
-    lines: list[tuple[FloatArray, FloatArray, float, float]], surf: Surfels, mapping: LineMapping, surfel_m: float
-) -> list[tuple[FloatArray, FloatArray, float, float]]:
-    """The lines with a planar surfel (of any frame, at ``T``) beside at most ``MAX_BESIDE_PLANE`` of
-    their length. A plate's rim seen edge on is a strip too, one-sided: its plate lies beside it in
-    the other frames. A member stands free, but where it meets the bus."""
-    planar = np.flatnonzero(surf.planar)
-    if len(planar) == 0 or not lines:
-        return lines
-    tree = cKDTree(mapping.apply(surf.anchor_obs[planar], surf.line[planar]))
-    out = []
-    for c, d, lo, hi in lines:
-        steps = np.arange(lo, hi + 1e-9, surfel_m)
-        near = tree.query_ball_point(c + steps[:, None] * d, BESIDE_PLANE_SURFELS * surfel_m, return_length=True)
-        if np.mean(near > 0) <= MAX_BESIDE_PLANE:
-            out.append((c, d, lo, hi))
-    return out
-
-
-def _claimed(
-    y_t: FloatArray, free: NDArray[np.bool_], lines: list[tuple[FloatArray, FloatArray, float, float]], radius_m: float
-) -> IntArray:
-    """Each point's member ``(n,)``: the nearest of the ``lines`` (centre, direction, extent along it)
-    within ``radius_m`` of it, for the ``free`` points; ``-1`` for the others."""
-    out = np.full(len(y_t), -1, dtype=np.int64)
-    idx = np.flatnonzero(free)
-    if not lines or len(idx) == 0:
-        return out
-    best = np.full(len(y_t), np.inf)
-    tree = cKDTree(y_t[idx])
-    for k, (c, d, lo, hi) in enumerate(lines):
-        # Balls along the segment, radius_m apart, cover its cylinder.
-        steps = np.arange(lo, hi + radius_m, radius_m)
-        balls = tree.query_ball_point(c + steps[:, None] * d, radius_m * np.sqrt(1.25))
-        near = idx[np.unique(np.concatenate([np.asarray(b, dtype=np.int64) for b in balls]))]
-        v = y_t[near] - c
-        along = v @ d
-        dist2 = np.einsum("ni,ni->n", v, v) - along**2
-        ok = (along >= lo) & (along <= hi) & (dist2 <= radius_m**2) & (dist2 < best[near])
-        best[near[ok]] = dist2[ok]
-        out[near[ok]] = k
-    return out
-
-
 def _member_hits(
-    data: DenseData,
-    idx: IntArray,
-    y_t: FloatArray,
-    sight_t: FloatArray,
-    lateral_var: FloatArray,
-    range_var_m2: float,
+    data: DenseData, idx: IntArray, y_t: FloatArray, sight_t: FloatArray, noise: SensorNoise
 ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray] | None:
     """The hits ``idx`` of one member that lie on its line (not seen end on, not another part's),
     the variances of each one's offsets across the line and along the sight, and the latter's
@@ -445,10 +120,12 @@ def _member_hits(
     few frames, too short, or spread wider than ``MAX_SPREAD_M``)."""
     if len(np.unique(data.frame[idx])) < MIN_FRAMES:
         return None
+    range_var_m2 = noise.range_sigma_m**2
+    lateral_var = (noise.angle_sigma_rad * np.linalg.norm(data.xyz_m[idx], axis=1)) ** 2
     keep = np.ones(len(idx), dtype=bool)
     for _ in range(2):
         # The line, then the hits off it (a node, a crossing member), twice (beam_rows fits it anew).
-        c, d = _fit_line(y_t[idx[keep]], np.ones(int(keep.sum())))
+        c, d = fit_line(y_t[idx[keep]], np.ones(int(keep.sum())))
         along = (y_t[idx] - c) @ d
         off = y_t[idx] - c - along[:, None] * d
         e = np.cross(d, sight_t[idx])
@@ -459,7 +136,7 @@ def _member_hits(
         keep = sin >= np.sin(MIN_SIGHT_ANGLE)
         if not np.any(keep):
             return None
-        scale = max(1.4826 * float(np.median(np.abs(r[keep]))), float(np.sqrt(np.median(lateral_var[idx]))))
+        scale = max(1.4826 * float(np.median(np.abs(r[keep]))), float(np.sqrt(np.median(lateral_var))))
         ahead_mid = float(np.median(ahead[keep]))
         ahead_scale = max(_robust_sigma(ahead[keep]), float(np.sqrt(range_var_m2)))
         keep &= np.abs(r) <= OUTLIER_SIGMAS * scale
@@ -469,11 +146,11 @@ def _member_hits(
         return None
     if np.sqrt(np.mean(np.sum(off[keep] ** 2, axis=1))) > MAX_SPREAD_M:
         return None
-    idx, frame = idx[keep], frame[keep]
+    idx, frame, lateral_var = idx[keep], frame[keep], lateral_var[keep]
     segment = np.floor(along[keep] / data.surfel_m).astype(np.int64)
     # The member's section as the pixels see it, per frame: the spread of its hits across it and
     # along the sight, at least the sensor's noise.
-    lateral = np.maximum(_frame_spread(r[keep], frame, segment, scale**2), lateral_var[idx])
+    lateral = np.maximum(_frame_spread(r[keep], frame, segment, scale**2), lateral_var)
     ahead_var = np.maximum(_frame_spread(ahead[keep], frame, segment, ahead_scale**2), range_var_m2)
     across = float(np.median([_robust_sigma(r[keep][frame == f]) for f in np.unique(frame)]))
     return idx, lateral, ahead_var, _shrinks(frame, ahead_var, (DEPTH_WOBBLE * across) ** 2)
@@ -529,7 +206,7 @@ def beam_rows(
     n = len(beams.point)
     xyz, line = data.xyz_m[beams.point], data.line[beams.point]
     y = mapping.apply(xyz, line)
-    u = _sights(data, mapping, beams.point)
+    u = sights(data, mapping, beams.point)
     w = 1.0 / beams.row_var_m2
     direction = np.empty((2 * n, 3))
     J_line = np.zeros((2 * n, 5))
@@ -537,7 +214,7 @@ def beam_rows(
     rows = []
     for k in range(beams.members):
         s = np.arange(beams.bounds[k], beams.bounds[k + 1])
-        c, d = _fit_line(y[s], w[s])
+        c, d = fit_line(y[s], w[s])
         across = np.cross(d, u[s])
         across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-12)
         E = np.stack(perpendiculars(d[None, :]), axis=1)[0]  # (2, 3): the line's offsets and tilts

@@ -20,8 +20,8 @@ from ...geometry.rotations import axis_from_angles
 from ..options import FramesOptions
 from ..sensor import SensorNoise
 from ..validation import axis_sigma_rad
+from .data import DenseData
 from .refine import DenseFit, refine_dense
-from .surfels import DenseData
 
 # Axes (or one and the other's opposite) closer than this, or closer than this many of their
 # combined sigmas, are "nearly parallel".

@@ -32,10 +32,10 @@ from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validati
 from ..sensor import SensorNoise
 from ..validation import Similarity, validation_frame_count
 from .attempts import RegistrationPoints, Setup, Solve, best_attempt, poor_fit
+from .data import prepare
 from .degeneracy import degenerate_warnings, imprecision_warning
 from .refine import DenseFit
 from .registration import VOXEL_FRACTION, extent_m, register_consecutive
-from .surfels import prepare
 
 # Registration works on a thinned copy of each frame: this many points at most.
 REGISTRATION_POINTS = 60_000

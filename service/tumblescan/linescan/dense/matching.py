@@ -19,7 +19,9 @@ from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
 from ..sensor import SensorNoise
-from .surfels import DenseData, LineMapping, Surfels, normal_variance
+from .data import DenseData
+from .mapping import LineMapping
+from .surfels import Surfels, normal_variance
 
 CAUCHY_C = 2.385  # Cauchy constant for 95 % efficiency under Gaussian noise
 MAX_NORMAL_ANGLE_COS = np.cos(np.radians(45.0))

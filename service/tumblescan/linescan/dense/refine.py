@@ -45,8 +45,10 @@ from ..sensor import SensorNoise
 from ..validation import canonical_cov
 from .beams import Beams, beam_rows, find_beams
 from .covariance import patches, sandwich
+from .data import DenseData
+from .mapping import LineMapping
 from .matching import CAUCHY_C, Linearized, Matches, cauchy_cost, linearize, match, residuals, robust_sigma, weights
-from .surfels import DenseData, LineMapping, Surfels, build_surfels
+from .surfels import Surfels, build_surfels
 
 ALL_FREE = tuple(range(N_PARAMS))
 SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)

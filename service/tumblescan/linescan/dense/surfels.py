@@ -1,17 +1,14 @@
-"""Surfels: small planar patches of each frame, and the per-line rotations that move them.
+"""Surfels: small planar patches of each frame, one per cell of the sensor's view (:mod:`.data`).
 
-Each frame is cut into cells of the sensor's view (direction, not 3D: a 3D voxel whose face
-cuts a surface keeps the points that range noise pushed inside, and its centroid sits off the
-surface). With a motion ``x``, every point ``p`` seen at ``t = T + tau`` maps to the reference
-time as ``M(p, tau; x) = O_p + R(tau)^T (p - O_p)``; a surfel's points mapped so give its
-centroid and normal, and the surfel is attached to the line of its mean time so that it moves
-with the motion like a point.
+A cell's points, mapped to the reference time with the motion (:mod:`.mapping`), give its
+centroid and normal; the surfel is attached to the line of its mean time so that it moves with
+the motion like a point. Only cells that are flat, interior and inside a face (:mod:`.faces`)
+take part in the fit.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,12 +16,10 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
-from ...geometry.rotations import axis_from_angles, rotation_matrix
-from ..sensor import SensorNoise, azimuth_elevation
+from ..sensor import SensorNoise
 from .curvature import CURVATURE_RADIUS, foot_offset
+from .data import DenseData, cell_lines
 from .faces import (
-    NEIGHBOUR_OFFSETS,
-    SIDE_NEIGHBOURS,
     CellPlanes,
     assign_to_faces,
     beside_face,
@@ -33,16 +28,8 @@ from .faces import (
     flat_cells,
     inside_face,
 )
-from .returns import range_inliers
+from .mapping import LineMapping
 
-STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
-# Neighbouring cells of one surface differ in range by less than this many surfel sizes.
-MAX_RANGE_STEP = 4.0
-# Far returns (:func:`~.returns.range_inliers`) up to this share of the points are taken for the
-# minorities of cells across an occlusion (0.2 % of clean simulated frames) and kept: leaving
-# those out let cells at edges pass for planar, and on the 100 m bench error/sigma rose from
-# 1.04 to 1.16. More than this are spurious returns and are left out.
-SPURIOUS_MIN_SHARE = 0.01
 # A surfel's normal pools the planar cells of every frame within this many surfel sizes (at T)
 # whose own normals agree within this angle.
 SHARED_RADIUS = 1.5
@@ -53,222 +40,6 @@ SHARED_MAX_ANGLE = np.radians(30.0)
 # The points of the cells left out beside an outline are not handed to other cells (build_surfels).
 KEEP_EDGE_POINTS_OUT = True
 CURVATURE_CORRECTION = True  # anchors on the surface, not at the centroids (curvature.py)
-# Points mapped to T per chunk of this many (LineMapping.apply): the gathered rotations stay in cache.
-APPLY_CHUNK = 65536
-# Rows per chunk of LineMapping.normal_derivative: its (rows, 9, parameters) gather stays in cache.
-DERIVATIVE_CHUNK = 4096
-
-
-@dataclass(frozen=True)
-class DenseData:
-    """Every point of the frames with its line time and surfel.
-
-    xyz_m: ``(n, 3)`` sensor frame at observation; frame: ``(n,)``; line: ``(n,)`` index into
-    ``tau_s`` (distinct offsets from ``T``, s); cell: ``(n,)`` surfel index; cell_frame:
-    ``(m,)`` frame of each surfel.
-    """
-
-    xyz_m: FloatArray
-    frame: IntArray
-    line: IntArray
-    tau_s: FloatArray
-    cell: IntArray
-    cell_frame: IntArray
-    n_frames: int
-    surfel_m: float
-    extent_m: float
-    interior: NDArray[np.bool_]
-    neighbours: IntArray  # (m, 8) the cells around each in its frame's view, -1 where none
-    # The input's points kept (:func:`prepare` leaves spurious returns out); None: all of them.
-    kept: NDArray[np.bool_] | None = None
-
-    @cached_property
-    def own_cell_lines(self) -> tuple[FloatArray, IntArray]:
-        """Each cell's point count and the line nearest its points' mean time: the same for
-        every surfel build (read only)."""
-        return _cell_lines(self.tau_s, self.line, self.cell, len(self.cell_frame))
-
-    @property
-    def spurious(self) -> int:
-        """How many of the input's points were left out as spurious returns."""
-        return 0 if self.kept is None else int(np.sum(~self.kept))
-
-    def first_frames(self, n: int) -> DenseData:
-        """The same data restricted to frames ``0 .. n-1``."""
-        if n >= self.n_frames:
-            return self
-        keep = self.frame < n
-        kept_cells = self.cell_frame < n
-        new_cell = np.cumsum(kept_cells) - 1
-        nb = self.neighbours[kept_cells]
-        return DenseData(
-            self.xyz_m[keep],
-            self.frame[keep],
-            self.line[keep],
-            self.tau_s,
-            new_cell[self.cell[keep]].astype(np.int64),
-            self.cell_frame[kept_cells],
-            n,
-            self.surfel_m,
-            self.extent_m,
-            self.interior[kept_cells],
-            np.where(nb >= 0, new_cell[nb], -1).astype(np.int64),
-        )
-
-
-def prepare(
-    xyz_m: FloatArray, tau_s: FloatArray, frame: IntArray, *, surfel_m: float, range_sigma_m: float | None = None
-) -> DenseData:
-    """Group points into lines (distinct ``tau_s``) and surfels: per frame, cells of the
-    sensor's view about ``surfel_m`` wide at the median range. Cells are cut in direction, not
-    in 3D, because membership must not depend on the range noise: a voxel whose face cuts a
-    surface keeps the points that noise pushed inside, and its centroid is biased off the surface.
-    Given the sensor's ``range_sigma_m``, spurious returns (a range far outside the rest of its
-    cell's, :func:`~.returns.range_inliers`) are left out when they are more than ``SPURIOUS_MIN_SHARE``
-    of the points: a few of them make a cell fail every planarity test."""
-    az, el = azimuth_elevation(xyz_m)
-    range_m = np.linalg.norm(xyz_m, axis=1)
-    step = surfel_m / float(np.median(range_m))
-    a = np.floor((az - az.min()) / step).astype(np.int64)
-    e = np.floor((el - el.min()) / step).astype(np.int64)
-    f = frame.astype(np.int64)
-    dims = (a.max() + 3, e.max() + 3)  # one empty cell of margin either side
-    key = (f * dims[0] + a + 1) * dims[1] + e + 1
-    keys, first, cell = np.unique(key, return_index=True, return_inverse=True)
-    # The interior test reads every return's range, spurious or not: a cell across an
-    # occlusion stays off the interior even when its far minority is left out below.
-    rho = np.bincount(cell, range_m) / np.bincount(cell)
-    neighbours = _view_neighbours(keys, dims[1])
-    kept = None if range_sigma_m is None else range_inliers(cell, range_m, range_sigma_m, neighbours)
-    if kept is not None and np.mean(~kept) <= SPURIOUS_MIN_SHARE:
-        kept = None
-    # Every cell keeps its median return, so the cells (and their order) stay as they are.
-    sel = slice(None) if kept is None else kept
-    tau_u, line = np.unique(tau_s[sel], return_inverse=True)
-    xyz = np.asarray(xyz_m, dtype=float)[sel]
-    return DenseData(
-        xyz,
-        f[sel],
-        line.astype(np.int64),
-        tau_u,
-        cell[sel].astype(np.int64),
-        f[first],
-        int(f.max()) + 1,
-        surfel_m,
-        float(np.linalg.norm(np.ptp(xyz, axis=0))),
-        _interior(neighbours, rho, max_step_m=MAX_RANGE_STEP * surfel_m),
-        neighbours,
-        kept,
-    )
-
-
-def _view_neighbours(keys: IntArray, stride: int) -> IntArray:
-    """Index of the 8 cells around each cell of a frame's view, ``-1`` where none was hit;
-    column ``k`` is the offset ``NEIGHBOUR_OFFSETS[k]`` in (azimuth, elevation) cells."""
-    out = np.full((len(keys), 8), -1, dtype=np.int64)
-    for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS):
-        offset = da * stride + de
-        nb = keys + offset
-        pos = np.clip(np.searchsorted(keys, nb), 0, len(keys) - 1)
-        out[:, k] = np.where(keys[pos] == nb, pos, -1)
-    return out
-
-
-def _interior(neighbours: IntArray, rho_m: FloatArray, *, max_step_m: float) -> NDArray[np.bool_]:
-    """Cells whose 4 neighbours in the view were hit too, at nearly the same range: not on the
-    edge of the field of view, of the target's silhouette or of an occlusion, where a partner
-    frame sees a different part of the scene and a match would land on the wrong surface.
-    (Taking silhouette cells as well, 5-8 % more points, made the precession axis worse on the
-    truss, the dish and the telescope: 0.11 -> 0.46, 0.05 -> 0.13, 0.26 -> 0.45 deg.)"""
-    side = neighbours[:, list(SIDE_NEIGHBOURS)]
-    near = np.abs(rho_m[np.maximum(side, 0)] - rho_m[:, None]) <= max_step_m
-    return np.asarray(np.all((side >= 0) & near, axis=1))
-
-
-class LineMapping:
-    """``R(tau)^T`` per line and its derivatives w.r.t. the free parameters (complex step)."""
-
-    def __init__(self, x: FloatArray, tau_s: FloatArray, free: tuple[int, ...]) -> None:
-        self.x = x
-        self.tau_s = tau_s
-        self.Rt = _rotations_T(x.astype(complex)[None, :], tau_s)[0].real
-        self.free = free
-        self.center = x[6:9]
-
-    @cached_property
-    def dRt(self) -> FloatArray:
-        """``(lines, 9, k)``: row ``3a + b`` holds ``d(R^T)[a, b]`` for each free parameter."""
-        # The centre (parameters 6-8) does not enter R: its columns are zero, not probed.
-        turning = [j for j, p in enumerate(self.free) if p < 6]
-        probes = np.tile(self.x.astype(complex), (len(turning), 1))
-        probes[np.arange(len(turning)), [self.free[j] for j in turning]] += 1j * STEP
-        dRt = np.zeros((len(self.tau_s), 9, len(self.free)))
-        step = _rotations_T(probes, self.tau_s).imag / STEP  # (turning, lines, 3, 3)
-        dRt[:, :, turning] = step.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(turning))
-        return dRt
-
-    @cached_property
-    def _rows(self) -> FloatArray:
-        """``R(tau)^T`` per line as 9 contiguous rows ``(9, lines)``: entry ``3a + b`` of every line."""
-        return np.ascontiguousarray(self.Rt.reshape(len(self.tau_s), 9).T)
-
-    def apply(self, xyz: FloatArray, line: IntArray) -> FloatArray:
-        return self._turned(xyz, line, center=self.center, about_center=False)
-
-    def apply_about_center(self, xyz: FloatArray, line: IntArray) -> FloatArray:
-        """``apply(xyz, line) - center``, rounded as that is (the surfel build works about the centre)."""
-        return self._turned(xyz, line, center=self.center, about_center=True)
-
-    def rotate(self, v: FloatArray, line: IntArray) -> FloatArray:
-        return self._turned(v, line, center=None, about_center=False)
-
-    def _turned(self, xyz: FloatArray, line: IntArray, *, center: FloatArray | None, about_center: bool) -> FloatArray:
-        """``O_p + R^T (p - O_p)`` per row (``R^T p`` without a ``center``), less ``O_p`` when
-        ``about_center``. The lines' entries are gathered in chunks that stay in cache, and each
-        row's products summed in the order ``b = 0, 1, 2``, as the einsum over the gathered
-        ``(n, 3, 3)`` did (same rounding, half the time on the millions of points a surfel
-        build maps)."""
-        rows = self._rows
-        out = np.empty((len(xyz), 3))
-        for s in range(0, len(xyz), APPLY_CHUNK):
-            v = (xyz[s : s + APPLY_CHUNK] if center is None else xyz[s : s + APPLY_CHUNK] - center).T
-            ln = line[s : s + APPLY_CHUNK]
-            o = out[s : s + APPLY_CHUNK]
-            for a in range(3):
-                o[:, a] = rows[3 * a][ln] * v[0] + rows[3 * a + 1][ln] * v[1] + rows[3 * a + 2][ln] * v[2]
-            if center is not None:
-                o += center
-                if about_center:
-                    o -= center
-        return out
-
-    def normal_derivative(self, n: FloatArray, xyz: FloatArray, line: IntArray) -> FloatArray:
-        """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``; the centre enters as ``(I - R^T)``."""
-        v = xyz - self.center
-        out = np.zeros((len(xyz), len(self.free)))
-        dRt = self.dRt
-        # Each row's lines' derivatives gathered once per chunk that stays in cache (not once
-        # per entry of R^T over every row), summed in the same order.
-        for s in range(0, len(xyz), DERIVATIVE_CHUNK):
-            part = dRt[line[s : s + DERIVATIVE_CHUNK]]
-            o, n_s, v_s = out[s : s + DERIVATIVE_CHUNK], n[s : s + DERIVATIVE_CHUNK], v[s : s + DERIVATIVE_CHUNK]
-            for a in range(3):
-                for b in range(3):
-                    o += (n_s[:, a] * v_s[:, b])[:, None] * part[:, 3 * a + b]
-        Rtn = np.einsum("nab,na->nb", self.Rt[line], n)
-        for j, p in enumerate(self.free):
-            if p >= 6:
-                out[:, j] += n[:, p - 6] - Rtn[:, p - 6]
-        return out
-
-
-def _rotations_T(x: NDArray[np.complex128], tau_s: FloatArray) -> NDArray[np.complex128]:
-    """``R(tau)^T = Rs^T Rp^T`` for parameter rows ``(k, 9)`` and offsets ``(m,)``: ``(k, m, 3, 3)``."""
-    l_s = axis_from_angles(x[:, 0], x[:, 1])[:, None, :]
-    l_p = axis_from_angles(x[:, 3], x[:, 4])[:, None, :]
-    Rs = rotation_matrix(l_s, x[:, [2]] * tau_s)
-    Rp = rotation_matrix(l_p, x[:, [5]] * tau_s)
-    return np.asarray(np.swapaxes(Rp @ Rs, -1, -2))
 
 
 def normal_variance(noise: SensorNoise, xyz_obs: FloatArray, n_obs: FloatArray) -> FloatArray:
@@ -365,17 +136,6 @@ class Surfels:
     point_cell: IntArray
 
 
-def _cell_lines(tau_s: FloatArray, point_line: IntArray, cell: IntArray, m: int) -> tuple[FloatArray, IntArray]:
-    """Count ``(m,)`` of each cell's points and the line nearest their mean time ``(m,)``
-    (``tau_s`` per line, ``point_line`` per point)."""
-    count = np.bincount(cell, minlength=m).astype(float)
-    tau_mean = np.bincount(cell, tau_s[point_line], minlength=m) / np.maximum(count, 1)
-    line = np.clip(np.searchsorted(tau_s, tau_mean), 0, len(tau_s) - 1)
-    lower = np.maximum(line - 1, 0)
-    line = np.where(np.abs(tau_s[lower] - tau_mean) < np.abs(tau_s[line] - tau_mean), lower, line)
-    return count, line
-
-
 def _cell_moments(
     data: DenseData, mapped: FloatArray, cell: IntArray, m: int, *, only: NDArray[np.bool_] | None = None
 ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray]:
@@ -392,7 +152,7 @@ def _cell_moments(
     if only is None and cell is data.cell:
         count, line = data.own_cell_lines
     else:
-        count, line = _cell_lines(data.tau_s, point_line, cell, m)
+        count, line = cell_lines(data.tau_s, point_line, cell, m)
     safe = np.maximum(count, 1)
     mean = np.stack([np.bincount(cell, mapped[:, i], minlength=m) for i in range(3)], axis=1) / safe[:, None]
     cov = np.empty((m, 3, 3))
