@@ -121,7 +121,7 @@ def _member_hits(
     if len(np.unique(data.frame[idx])) < MIN_FRAMES:
         return None
     range_var_m2 = noise.range_sigma_m**2
-    lateral_var = (noise.angle_sigma_rad * np.linalg.norm(data.xyz_m[idx], axis=1)) ** 2
+    lateral_var = (noise.angle_sigma_rad * data.range_m[idx]) ** 2
     keep = np.ones(len(idx), dtype=bool)
     for _ in range(2):
         # The line, then the hits off it (a node, a crossing member), twice (beam_rows fits it anew).

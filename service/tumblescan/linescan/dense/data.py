@@ -57,6 +57,19 @@ class DenseData:
         every surfel build (read only)."""
         return cell_lines(self.tau_s, self.line, self.cell, len(self.cell_frame))
 
+    @cached_property
+    def range_m(self) -> FloatArray:
+        """Each point's range ``(n,)`` (read only)."""
+        return np.asarray(np.linalg.norm(self.xyz_m, axis=1))
+
+    @cached_property
+    def cell_range_m(self) -> FloatArray:
+        """Each cell's mean range ``(m,)`` (read only)."""
+        m = len(self.cell_frame)
+        return np.asarray(
+            np.bincount(self.cell, self.range_m, minlength=m) / np.maximum(np.bincount(self.cell, minlength=m), 1)
+        )
+
     @property
     def spurious(self) -> int:
         """How many of the input's points were left out as spurious returns."""

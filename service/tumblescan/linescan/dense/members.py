@@ -43,6 +43,8 @@ MEMBER_MAX_ANGLE = np.radians(30.0)
 MAX_SEEDS = 40
 MAX_IDLE_ROUNDS = 5
 GROW_REACH_SURFELS = (2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
+# Lines times strips grown side by side at most (the groups of strips hold a few hundred).
+MAX_SUPPORT_ENTRIES = 1_000_000
 # A member: seen in this many frames, this long.
 MIN_FRAMES = 3
 MIN_LENGTH_SURFELS = 4.0
@@ -148,7 +150,7 @@ def range_pieces(data: DenseData, free: NDArray[np.bool_], gap_m: float) -> IntA
     their ranges, in order, jump by more than ``gap_m``. A cell of the view holds whatever lies
     along its rays: the front and back members of a truss, a wire before a panel."""
     idx = np.flatnonzero(free)
-    rho = np.linalg.norm(data.xyz_m[idx], axis=1)
+    rho = data.range_m[idx]
     order = np.lexsort((rho, data.cell[idx]))
     cell, rho = data.cell[idx][order], rho[order]
     new = np.ones(len(idx), dtype=bool)
@@ -180,11 +182,8 @@ def strip_pieces(
     first = np.zeros(k, dtype=np.int64)
     first[piece[on]] = np.flatnonzero(on)
     cell = data.cell[first]
-    rho = np.bincount(piece[on], np.linalg.norm(data.xyz_m[on], axis=1), minlength=k) / np.maximum(count, 1)
-    m = len(data.cell_frame)
-    cell_rho = np.bincount(data.cell, np.linalg.norm(data.xyz_m, axis=1), minlength=m) / np.maximum(
-        np.bincount(data.cell, minlength=m), 1
-    )
+    rho = np.bincount(piece[on], data.range_m[on], minlength=k) / np.maximum(count, 1)
+    cell_rho = data.cell_range_m
     beside_plane = np.zeros(k, dtype=bool)
     for j in range(data.neighbours.shape[1]):
         nb = data.neighbours[cell, j]
@@ -214,26 +213,32 @@ def _linked_groups(centre: FloatArray, direction: FloatArray, surfel_m: float) -
 
 def _support(
     centre: FloatArray, direction: FloatArray, c: FloatArray, d: FloatArray, across_m: float
-) -> NDArray[np.bool_]:
-    """Strips on the line ``c + s d``: centre within ``across_m`` of it, direction within ``MEMBER_MAX_ANGLE``."""
-    gap = centre - c
-    along = gap @ d
-    near = np.einsum("ni,ni->n", gap, gap) - along**2 <= across_m**2
-    return np.asarray(near & (np.abs(direction @ d) >= np.cos(MEMBER_MAX_ANGLE)))
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Strips on each line ``c_k + s d_k`` (``c``, ``d``: ``(k, 3)``): centre within ``across_m`` of
+    it, direction within ``MEMBER_MAX_ANGLE``, ``(k, n)``; with each strip's offset along it."""
+    gap = centre[None, :, :] - c[:, None, :]
+    along = np.einsum("kni,ki->kn", gap, d)
+    near = np.einsum("kni,kni->kn", gap, gap) - along**2 <= across_m**2
+    return np.asarray(near & (np.abs(d @ direction.T) >= np.cos(MEMBER_MAX_ANGLE))), np.asarray(along)
 
 
 def _grown(
-    seed: int, centre: FloatArray, direction: FloatArray, weight: FloatArray, across_m: float, surfel_m: float
+    seeds: IntArray, centre: FloatArray, direction: FloatArray, weight: FloatArray, across_m: float, surfel_m: float
 ) -> tuple[FloatArray, FloatArray]:
-    """The line through strip ``seed``, grown along itself: its strips within a reach that doubles,
-    the line fitted to their centres each time (one strip's direction is a few degrees off; over
-    a few metres the centres fix it)."""
-    c, d = centre[seed], direction[seed]
+    """The lines ``(k, 3)``, ``(k, 3)`` through strips ``seeds``, grown along themselves: each
+    line's strips within a reach that doubles, the line fitted to their centres each time (one
+    strip's direction is a few degrees off; over a few metres the centres fix it); a line stops
+    growing when fewer than two strips are within its reach."""
+    c, d = centre[seeds].copy(), direction[seeds].copy()
+    growing = np.ones(len(seeds), dtype=bool)
     for reach in GROW_REACH_SURFELS:
-        on = _support(centre, direction, c, d, across_m) & (np.abs((centre - c) @ d) <= reach * surfel_m)
-        if on.sum() < 2:
+        on, along = _support(centre, direction, c[growing], d[growing], across_m)
+        on &= np.abs(along) <= reach * surfel_m
+        still = on.sum(axis=1) >= 2
+        growing[growing] = still
+        if not np.any(still):
             break
-        c, d = fit_line(centre[on], weight[on])
+        c[growing], d[growing] = fit_lines(centre, np.where(on[still], weight, 0.0))
     return c, d
 
 
@@ -250,23 +255,43 @@ def _members(
     idle = 0  # rounds in a row without a member: a large group of strips that are no members
     while len(left) >= MIN_FRAMES and len(untried) and idle < MAX_IDLE_ROUNDS:
         seeds = untried if len(untried) <= MAX_SEEDS else rng.choice(untried, MAX_SEEDS, replace=False)
+        # A seed whose line was a member's, though not the best, is tried again in the next round.
         untried = np.setdiff1d(untried, seeds)
+        valid: list[int] = []
         best, best_weight = np.zeros(0, dtype=np.int64), 0.0
-        for i in seeds:
-            c, d = _grown(
-                int(np.searchsorted(left, i)), centre[left], direction[left], weight[left], across_m, surfel_m
-            )
-            on = left[_support(centre[left], direction[left], c, d, across_m)]
-            if len(np.unique(frame[on])) >= MIN_FRAMES and weight[on].sum() > best_weight:
-                along = (centre[on] - c) @ d
-                if np.ptp(along) >= MIN_LENGTH_SURFELS * surfel_m:
+        c_left, d_left = centre[left], direction[left]
+        # The seeds' lines are grown side by side, as many at once as keep the arrays small.
+        per_pass = max(1, MAX_SUPPORT_ENTRIES // len(left))
+        for first in range(0, len(seeds), per_pass):
+            at = np.searchsorted(left, seeds[first : first + per_pass])
+            c, d = _grown(at, c_left, d_left, weight[left], across_m, surfel_m)
+            support, along = _support(c_left, d_left, c, d, across_m)
+            for k in range(len(at)):
+                on = left[support[k]]
+                long_enough = len(on) and np.ptp(along[k][support[k]]) >= MIN_LENGTH_SURFELS * surfel_m
+                if not (long_enough and len(np.unique(frame[on])) >= MIN_FRAMES):
+                    continue
+                valid.append(int(left[at[k]]))
+                if weight[on].sum() > best_weight:
                     best, best_weight = on, float(weight[on].sum())
         idle = 0 if len(best) else idle + 1
         if len(best):
             out.append(best)
             left = np.setdiff1d(left, best)
-            untried = np.setdiff1d(untried, best)
+            untried = np.setdiff1d(np.union1d(untried, valid), best)
     return out
+
+
+def fit_lines(y: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`fit_line` of the rows ``y`` ``(n, 3)`` under each row of weights ``w`` ``(k, n)``:
+    centres and directions ``(k, 3)``."""
+    c = (w @ y) / w.sum(axis=1, keepdims=True)
+    v = y[None, :, :] - c[:, None, :]
+    scatter = np.einsum("kn,kni,knj->kij", w, v, v)
+    d = np.linalg.eigh(scatter)[1][:, :, 2]
+    flip = d[np.arange(len(d)), np.argmax(np.abs(d), axis=1)] < 0
+    d[flip] *= -1
+    return c, d
 
 
 def fit_line(y: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -282,7 +307,7 @@ def fit_line(y: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
 def sights(data: DenseData, mapping: LineMapping, idx: IntArray) -> FloatArray:
     """Unit lines of sight of the points ``idx`` turned to ``T``."""
     xyz = data.xyz_m[idx]
-    return mapping.rotate(xyz / np.linalg.norm(xyz, axis=1, keepdims=True), data.line[idx])
+    return mapping.rotate(xyz / data.range_m[idx][:, None], data.line[idx])
 
 
 def by_label(label: IntArray, n: int) -> list[IntArray]:
@@ -348,6 +373,13 @@ def _claimed(
     out = np.full(len(y_t), -1, dtype=np.int64)
     idx = np.flatnonzero(free)
     if not lines or len(idx) == 0:
+        return out
+    # Only the points within reach of some line's segment go into the tree.
+    ends = np.array([c + t * d for c, d, lo, hi in lines for t in (lo, hi)])
+    reach = radius_m * np.sqrt(1.25) + radius_m
+    y = y_t[idx]
+    idx = idx[np.all((y >= ends.min(axis=0) - reach) & (y <= ends.max(axis=0) + reach), axis=1)]
+    if len(idx) == 0:
         return out
     best = np.full(len(y_t), np.inf)
     tree = cKDTree(y_t[idx])
