@@ -312,7 +312,10 @@ def bound_covariances(
     return BoundCovariances(
         x=np.asarray(x, dtype=float),
         facets=np.asarray(np.linalg.inv(F_mm - absorbed + extra), dtype=np.float64),
-        known_shape=np.asarray(np.linalg.inv(F_mm - F_mp @ np.linalg.solve(F_pp, F_mp.T)), dtype=np.float64),
+        # pinv: a part of revolution alone (a tube, a dish) leaves its turn about its axis free.
+        known_shape=np.asarray(
+            np.linalg.inv(F_mm - F_mp @ np.linalg.pinv(F_pp, rcond=1e-10, hermitian=True) @ F_mp.T), dtype=np.float64
+        ),
         points=len(xyz),
         faces=len(used),
     )

@@ -1,0 +1,131 @@
+"""The hits of flat cells on a border of the view (issue 20): what they would add, and how pure they are.
+
+    python -m bench.linescan.border_diag [--cases long-array:100:3 box:100:2]
+
+At the true motion (the bench's seeded motion and frames), the surfels built as the estimator
+builds them. A *border* cell is not interior (a side neighbour of its frame's view not hit, or
+hit at a range more than ``MAX_RANGE_STEP`` surfels away: the silhouette, an occlusion); a *flat*
+one passes :func:`~tumblescan.linescan.dense.faces.flat_cells`. The estimator leaves them out,
+since a partner frame sees another part there and a plane fitted to them may lean towards another
+face. Per case: the dense bound (``dense_bound.py``, every mesh face a nuisance plane) of the hits
+used, then with the flat border cells' hits added (all of them; only those of cells whose hits
+lie 98 % or more on one face, which takes the truth; those of every flat border cell without the
+part of the cell next to its bad sides, the outer third or half, where the outline runs), each
+over the bound of all hits; and the share of the added hits that lie off their cell's main face.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData, prepare
+from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, flat_cells
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.registration import extent_m
+from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, build_surfels, normal_variance
+from tumblescan.linescan.sensor import SensorNoise, azimuth_elevation
+
+from ..common import table
+from .dense_bound import dense_bound, face_of_hits
+from .line_potential import PARAMS, _simulated
+
+PURE = 0.98
+
+
+def flat_border(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> NDArray[np.bool_]:
+    """The cells ``(m,)`` that are flat and not interior."""
+    m = len(data.cell_frame)
+    y = mapping.apply_about_center(data.xyz_m, data.line)
+    count, mean, cov, line = _cell_moments(data, y, data.cell, m)
+    Rt = mapping.Rt[line]
+    anchor_obs = mapping.center + np.einsum("nji,nj->ni", Rt, mean)
+    w, normal_ref, _ = _noise_free_normals(cov, Rt, anchor_obs, noise)
+    var = normal_variance(noise, anchor_obs, np.einsum("nji,nj->ni", Rt, normal_ref))
+    return np.asarray(flat_cells(w, var, count) & ~data.interior)
+
+
+def inward(data: DenseData) -> np.ndarray:
+    """Each point's distance in the view, in cells, from the nearest side of its cell whose neighbour
+    is missing or at a range step (9 where there is none)."""
+    az, el = azimuth_elevation(data.xyz_m)
+    step = data.surfel_m / float(np.median(data.range_m))
+    fa, fe = (az - az.min()) / step, (el - el.min()) / step
+    ua, ue = fa - np.floor(fa), fe - np.floor(fe)
+    rho = data.cell_range_m
+    out = np.full(len(data.xyz_m), 9.0)
+    for k, (da, de) in enumerate(NEIGHBOUR_OFFSETS):
+        if k not in SIDE_NEIGHBOURS:
+            continue
+        nb = data.neighbours[:, k]
+        bad = ((nb < 0) | (np.abs(rho[np.maximum(nb, 0)] - rho) > MAX_RANGE_STEP * data.surfel_m))[data.cell]
+        d = (1 - ua) if da == 1 else ua if da == -1 else (1 - ue) if de == 1 else ue
+        out = np.where(bad, np.minimum(out, d), out)
+    return out
+
+
+def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object]]:
+    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
+    noise = scene.scanner.noise
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
+    mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
+    surf = build_surfels(data, mapping, noise)
+    n, m = len(sim.xyz_m), len(data.cell_frame)
+    kept = np.ones(n, dtype=bool) if data.kept is None else data.kept
+
+    def full(v: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        out = np.zeros(n, dtype=bool)
+        out[kept] = v
+        return out
+
+    used = full(surf.planar[surf.point_cell])
+    faces = face_of_hits(scene, motion, sim.reference_m)
+    face = faces[0]
+    cell = np.full(n, -1, dtype=np.int64)
+    cell[kept] = data.cell
+    on = (face >= 0) & (cell >= 0)
+    pairs, cnt = np.unique(np.stack([cell[on], face[on]]), axis=1, return_counts=True)
+    order = np.argsort(cnt)
+    main_face = np.full(m, -1, dtype=np.int64)
+    main_face[pairs[0][order]] = pairs[1][order]  # the largest count written last
+    majority = np.zeros(m)
+    np.maximum.at(majority, pairs[0], cnt)
+    pure = majority / np.maximum(np.bincount(data.cell, minlength=m), 1) >= PURE
+    border = flat_border(data, mapping, noise)
+    depth = inward(data)
+    b_all = dense_bound(motion, scene, sim, T, faces=faces)
+    rows: list[list[object]] = []
+    for label, extra in [
+        ("used", np.zeros(n, dtype=bool)),
+        ("+ flat border", full(border[data.cell])),
+        (f"+ flat border, {PURE:.0%} pure (truth)", full((border & pure)[data.cell])),
+        ("+ flat border, inner 2/3", full(border[data.cell] & (depth > 1 / 3))),
+        ("+ flat border, inner 1/2", full(border[data.cell] & (depth > 1 / 2))),
+    ]:
+        added = extra & ~used
+        off = float(np.mean(face[added & on] != main_face[cell[added & on]])) if np.any(added & on) else 0.0
+        b = dense_bound(motion, scene, sim, T, hits=used | extra, faces=faces)
+        rows.append([name, f"{distance_m:g}", seed, label, f"{100 * added.mean():.1f}", f"{100 * off:.1f}",
+                     *[f"{b[p] / b_all[p]:.2f}" for p in PARAMS]])  # fmt: skip
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--cases", nargs="+", default=["long-array:100:3", "box:100:2"], help="shape:range_m:seed")
+    parser.add_argument("--size", type=int, default=512)
+    args = parser.parse_args()
+    rows = []
+    for spec in args.cases:
+        name, distance, seed = spec.split(":")
+        rows += case(name, float(distance), int(seed), args.size)
+    header = ["shape", "m", "seed", "hits", "added %", "added off their cell's face %", *[f"{p} / all" for p in PARAMS]]
+    print(table(rows, header))
+
+
+if __name__ == "__main__":
+    main()
