@@ -1,6 +1,7 @@
 """Where a bias of the dense fit comes from: the step from the truth, per patch of the target.
 
     python -m bench.linescan.bias_map [--shape hubble] [--distance 50] [--seed 2] [--draws 6] [--top 8]
+                                      [--variant true-tube-normals|curvature-64|no-handover]
 
 At the true motion, for several noise draws of one motion (noise seeds ``seed + 1000 k``): the
 surfels and the last stage's matches as the refinement builds them, and one Cauchy-weighted
@@ -12,6 +13,12 @@ keeps its sign in every draw (mean about as large as the mean of its magnitudes)
 that part of the surface. Sizes are in units of the dense bound (``dense_bound.py``), per
 parameter (spin axis, spin rate, precession axis, precession rate).
 
+``--variant`` measures one change of the surfels against the same draws (the steps of both are
+printed): ``true-tube-normals`` (the telescope only) puts the tube's true normals (radial from its
+axis, at each anchor) in place of the pooled ones, an oracle of how much the normals' noise moves
+the fit; ``curvature-64`` fits the curvature to 64 neighbours within 4 surfels (32 within 2.5);
+``no-handover`` hands no points of the cells across edges to their faces' cells.
+
 Noise-free frames do not serve: the normals are taken from the scatter less the sensor noise's
 covariance (``surfels._noise_free_normals``), which a noise-free cell does not have; on the box
 that alone makes a step of 2.2 bounds.
@@ -20,13 +27,23 @@ that alone makes a step of 2.2 bounds.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, random_motion
+from tumblescan import Motion, Scanner, Scene, random_motion
+from tumblescan.linescan.dense import curvature as curvature_mod
+from tumblescan.linescan.dense import surfels as surfels_mod
 from tumblescan.linescan.dense.covariance import patches
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import cauchyweights
+from tumblescan.linescan.dense.surfels import Surfels, _facing_sensor
 from tumblescan.linescan.validation import canonical_cov
+from tumblescan.target.shapes import TelescopeShape
 
 from ..common import table
 from .dense_bound import dense_bound, last_stage_matches, motion_sigmas_deg
@@ -40,11 +57,68 @@ def in_bounds(x: np.ndarray, delta: np.ndarray, bound: dict[str, float]) -> np.n
     return np.array([s[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS])
 
 
+VARIANTS = ("none", "true-tube-normals", "curvature-64", "no-handover")
 Patches = dict[tuple[int, ...], tuple[np.ndarray, int, float, np.ndarray]]
 
 
+def true_tube_normals(motion: Motion, scene: Scene, mapping: LineMapping, surf: Surfels, T: float) -> Surfels:
+    """``surf`` with the telescope tube's true normals (radial from its axis, the body's z) in
+    place of the pooled ones, on the planar surfels whose anchors lie on the tube."""
+    if not isinstance(scene.shape, TelescopeShape):
+        raise ValueError("true-tube-normals is for the telescope")
+    R = np.asarray(scene.R_body_to_sensor, dtype=float)
+    origin = np.asarray(motion.center_m) + np.asarray(scene.body_offset_m)
+    one = np.zeros(len(surf.line), dtype=np.int64)
+    # Anchors at T -> at the motion's reference time -> body frame; the normals back the same way.
+    to_ref = LineMapping(
+        motion.at_reference(motion.reference_time_s).params(), np.array([T - motion.reference_time_s]), mapping.free
+    )
+    from_ref = LineMapping(mapping.x, np.array([motion.reference_time_s - T]), mapping.free)
+    body = (to_ref.apply(mapping.apply(surf.anchor_obs, surf.line), one) - origin) @ R
+    radius = np.hypot(body[:, 0], body[:, 1])
+    shape = scene.shape
+    tube = (
+        surf.planar
+        & (np.abs(radius - shape.tube_radius_m) < 0.06)
+        & (np.abs(body[:, 2]) < shape.tube_length_m / 2 - 0.1)
+    )
+    n_body = np.zeros_like(body)
+    n_body[tube, :2] = body[tube, :2] / radius[tube, None]
+    n_T = from_ref.rotate(n_body @ R.T, one)
+    n_obs = _facing_sensor(np.einsum("nji,nj->ni", mapping.Rt[surf.line], n_T), surf.anchor_obs)
+    return replace(surf, normal_obs=np.where(tube[:, None], n_obs, surf.normal_obs))
+
+
+def _surfels(
+    variant: str, motion: Motion, scene: Scene, noise_seed: int
+) -> tuple[Any, DenseData, LineMapping, Surfels]:
+    """The frames at the truth and their surfels, as the estimator builds them or with ``variant``."""
+    if variant == "curvature-64":
+        with _patched(curvature_mod, CURVATURE_NEIGHBOURS=64), _patched(surfels_mod, CURVATURE_RADIUS=4.0):
+            return at_truth(motion, scene, noise_seed)
+    if variant == "no-handover":
+        with _patched(surfels_mod, assign_to_faces=lambda planes, givers, planar: planes.cell.copy()):
+            return at_truth(motion, scene, noise_seed)
+    sim, data, mapping, surf = at_truth(motion, scene, noise_seed)
+    if variant == "true-tube-normals":
+        surf = true_tube_normals(motion, scene, mapping, surf, float(sim.t_s.min()))
+    return sim, data, mapping, surf
+
+
+@contextmanager
+def _patched(module: Any, **values: Any) -> Iterator[None]:
+    saved = {k: getattr(module, k) for k in values}
+    for k, v in values.items():
+        setattr(module, k, v)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(module, k, v)
+
+
 def steps(
-    name: str, distance_m: float, seed: int, draws: int
+    name: str, distance_m: float, seed: int, draws: int, variant: str = "none"
 ) -> tuple[np.ndarray, list[Patches], np.ndarray, dict[str, float]]:
     """Per draw: the whole step ``(9,)`` and each patch's ``(contribution, residuals, mean e,
     centre at T)``, keyed by the patch's cube; the truth and the bound."""
@@ -52,7 +126,7 @@ def steps(
     scene = Scene(scanner=Scanner(lines=512, pixels=512), shape=shape_named(name))
     totals, per_patch = [], []
     for draw in range(draws):
-        sim, data, mapping, surf = at_truth(motion, scene, seed + 1000 * draw)
+        sim, data, mapping, surf = _surfels(variant, motion, scene, seed + 1000 * draw)
         if draw == 0:
             bound = dense_bound(motion, scene, sim, float(sim.t_s.min()))
         mt, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
@@ -73,6 +147,16 @@ def steps(
     return np.array(totals), per_patch, mapping.x, bound
 
 
+def summary(label: str, totals: np.ndarray, x: np.ndarray, bound: dict[str, float]) -> list[list[str]]:
+    """Rows of the steps' mean (the bias) and RMS over the draws, over the bound."""
+    mean = in_bounds(x, totals.mean(axis=0), bound)
+    rms = np.sqrt(np.mean([in_bounds(x, t, bound) ** 2 for t in totals], axis=0))
+    return [
+        [f"{label} mean (bias)".strip(), *(f"{v:.2f}" for v in mean)],
+        [f"{label} RMS".strip(), *(f"{v:.2f}" for v in rms)],
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--shape", default="hubble")
@@ -80,13 +164,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2)
     parser.add_argument("--draws", type=int, default=6)
     parser.add_argument("--top", type=int, default=8)
+    parser.add_argument("--variant", choices=VARIANTS, default="none")
     args = parser.parse_args()
     totals, per_patch, x, bound = steps(args.shape, args.distance, args.seed, args.draws)
     print(f"{args.shape} {args.distance:g} m seed {args.seed}, {args.draws} noise draws; step from the truth / bound")
-    mean = in_bounds(x, totals.mean(axis=0), bound)
-    rms = np.sqrt(np.mean([in_bounds(x, t, bound) ** 2 for t in totals], axis=0))
-    print(table([["mean (bias)", *(f"{v:.2f}" for v in mean)], ["RMS", *(f"{v:.2f}" for v in rms)]],
-                ["", *PARAMS]))  # fmt: skip
+    summaries = summary("", totals, x, bound)
+    if args.variant != "none":
+        varied = steps(args.shape, args.distance, args.seed, args.draws, args.variant)[0]
+        summaries += summary(args.variant, varied, x, bound)
+    print(table(summaries, ["", *PARAMS]))
     rows = []
     for key in set().union(*per_patch):
         parts = [d[key] for d in per_patch if key in d]
