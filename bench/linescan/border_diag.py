@@ -10,8 +10,9 @@ since a partner frame sees another part there and a plane fitted to them may lea
 face. Per case: the dense bound (``dense_bound.py``, every mesh face a nuisance plane) of the hits
 used, then with the flat border cells' hits added (all of them; only those of cells whose hits
 lie 98 % or more on one face, which takes the truth; those of every flat border cell without the
-part of the cell next to its bad sides, the outer third or half, where the outline runs), each
-over the bound of all hits; and the share of the added hits that lie off their cell's main face.
+part of the cell next to its bad sides, the outer third or half, where the outline runs; those of
+the silhouette, of the far side of an occlusion and of its near side apart), each over the bound
+of all hits; and the share of the added hits that lie off their cell's main face.
 """
 
 from __future__ import annotations
@@ -97,6 +98,13 @@ def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object
     pure = majority / np.maximum(np.bincount(data.cell, minlength=m), 1) >= PURE
     border = flat_border(data, mapping, noise)
     depth = inward(data)
+    # Which border: a side neighbour not hit (the silhouette), or one hit at a range step in front
+    # of the cell (the cell is the far side of an occlusion) or behind it (the near side, an edge).
+    side = data.neighbours[:, list(SIDE_NEIGHBOURS)]
+    step = data.cell_range_m[np.maximum(side, 0)] - data.cell_range_m[:, None]
+    missing = np.any(side < 0, axis=1)
+    in_front = np.any((side >= 0) & (step < -MAX_RANGE_STEP * data.surfel_m), axis=1)
+    behind = np.any((side >= 0) & (step > MAX_RANGE_STEP * data.surfel_m), axis=1)
     b_all = dense_bound(motion, scene, sim, T, faces=faces)
     rows: list[list[object]] = []
     for label, extra in [
@@ -105,6 +113,9 @@ def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object
         (f"+ flat border, {PURE:.0%} pure (truth)", full((border & pure)[data.cell])),
         ("+ flat border, inner 2/3", full(border[data.cell] & (depth > 1 / 3))),
         ("+ flat border, inner 1/2", full(border[data.cell] & (depth > 1 / 2))),
+        ("+ flat silhouette", full((border & missing)[data.cell])),
+        ("+ flat far side of a range step", full((border & ~missing & in_front & ~behind)[data.cell])),
+        ("+ flat near side of a range step", full((border & ~missing & behind & ~in_front)[data.cell])),
     ]:
         added = extra & ~used
         off = float(np.mean(face[added & on] != main_face[cell[added & on]])) if np.any(added & on) else 0.0
