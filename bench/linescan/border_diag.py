@@ -22,17 +22,18 @@ import argparse
 import numpy as np
 from numpy.typing import NDArray
 
-from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData, prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan import Scanner, Scene, random_motion
+from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData
 from tumblescan.linescan.dense.faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, flat_cells
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.registration import extent_m
-from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, build_surfels, normal_variance
+from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, azimuth_elevation
 
 from ..common import table
 from .dense_bound import dense_bound, face_of_hits
-from .line_potential import PARAMS, _simulated
+from .line_potential import PARAMS
+from .real_shapes import shape_named
+from .reuse_diag import at_truth
 
 PURE = 0.98
 
@@ -69,12 +70,10 @@ def inward(data: DenseData) -> np.ndarray:
 
 
 def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object]]:
-    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
-    noise = scene.scanner.noise
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
-    mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
-    surf = build_surfels(data, mapping, noise)
+    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
+    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
+    sim, data, mapping, surf = at_truth(motion, scene, seed)
+    noise, T = scene.scanner.noise, float(sim.t_s.min())
     n, m = len(sim.xyz_m), len(data.cell_frame)
     kept = np.ones(n, dtype=bool) if data.kept is None else data.kept
 
