@@ -56,7 +56,9 @@ SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
 SURFEL_REFRESH = 0.25
 REMATCH = 0.05
 PROBE_POINTS = 2000
-# Levenberg-Marquardt damping: start undamped, tighten on a rise of the cost, relax on success.
+# Levenberg-Marquardt damping: start undamped, tighten on a rise of the cost, relax on success, and
+# undamped again once relaxed below the first tightening (a damping that lingers at 1e-6 of the
+# diagonal still crawls along a nearly degenerate direction).
 LM_START = 0.0
 LM_FIRST_TIGHT = 1e-4
 LM_TIGHTEN = 10.0
@@ -341,7 +343,8 @@ def _damped_step(
         r = terms.residuals(problem, mapping)
         after = cauchy_cost(r / np.sqrt(lin.var), scale)
         if after <= before:
-            return np.asarray(dz, dtype=float), max(lam / LM_RELAX, LM_START), mapping
+            relaxed = lam / LM_RELAX
+            return np.asarray(dz, dtype=float), relaxed if relaxed >= LM_FIRST_TIGHT else LM_START, mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
     return None
 
