@@ -24,14 +24,13 @@ from numpy.typing import NDArray
 
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData
-from tumblescan.linescan.dense.faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS, flat_cells
+from tumblescan.linescan.dense.faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, azimuth_elevation
 
 from ..common import table
 from .dense_bound import dense_bound, face_of_hits
-from .line_potential import PARAMS
+from .line_potential import PARAMS, flat_of_cells
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
 
@@ -40,14 +39,7 @@ PURE = 0.98
 
 def flat_border(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> NDArray[np.bool_]:
     """The cells ``(m,)`` that are flat and not interior."""
-    m = len(data.cell_frame)
-    y = mapping.apply_about_center(data.xyz_m, data.line)
-    count, mean, cov, line = _cell_moments(data, y, data.cell, m)
-    Rt = mapping.Rt[line]
-    anchor_obs = mapping.center + np.einsum("nji,nj->ni", Rt, mean)
-    w, normal_ref, _ = _noise_free_normals(cov, Rt, anchor_obs, noise)
-    var = normal_variance(noise, anchor_obs, np.einsum("nji,nj->ni", Rt, normal_ref))
-    return np.asarray(flat_cells(w, var, count) & ~data.interior)
+    return np.asarray(flat_of_cells(data, mapping, noise)[0] & ~data.interior)
 
 
 def inward(data: DenseData) -> np.ndarray:

@@ -139,11 +139,10 @@ def classify(data: DenseData, mapping: LineMapping, planar_point: BoolArray, pla
 REASONS = ("thick", "silhouette", "range step", "face test")
 
 
-def why_left_out(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> IntArray:
-    """The first test each (kept) point's own cell fails, an index into ``REASONS``: not flat
-    (:func:`~tumblescan.linescan.dense.faces.flat_cells`), a side neighbour in the view not hit,
-    a side neighbour at a range more than ``MAX_RANGE_STEP`` cells away, or flat and interior yet
-    not planar (the face tests); ``-1`` for a cell that passes all of the first three."""
+def flat_of_cells(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> tuple[BoolArray, FloatArray]:
+    """Whether each cell's own points at ``mapping`` pass
+    :func:`~tumblescan.linescan.dense.faces.flat_cells` ``(m,)``, and its centroid at observation
+    ``(m, 3)``."""
     m = len(data.cell_frame)
     y = mapping.apply(data.xyz_m, data.line) - mapping.center
     count, mean, cov, line = _cell_moments(data, y, data.cell, m)
@@ -151,6 +150,15 @@ def why_left_out(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> I
     anchor_obs = mapping.center + np.einsum("nji,nj->ni", Rt, mean)
     w, normal_ref, _ = _noise_free_normals(cov, Rt, anchor_obs, noise)
     flat = flat_cells(w, normal_variance(noise, anchor_obs, np.einsum("nji,nj->ni", Rt, normal_ref)), count)
+    return np.asarray(flat), np.asarray(anchor_obs)
+
+
+def why_left_out(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> IntArray:
+    """The first test each (kept) point's own cell fails, an index into ``REASONS``: not flat
+    (:func:`~tumblescan.linescan.dense.faces.flat_cells`), a side neighbour in the view not hit,
+    a side neighbour at a range more than ``MAX_RANGE_STEP`` cells away, or flat and interior yet
+    not planar (the face tests); ``-1`` for a cell that passes all of the first three."""
+    flat, anchor_obs = flat_of_cells(data, mapping, noise)
     side = data.neighbours[:, list(SIDE_NEIGHBOURS)]
     rho = np.linalg.norm(anchor_obs, axis=1)
     missing = np.any(side < 0, axis=1)

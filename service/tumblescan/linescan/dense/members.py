@@ -259,12 +259,12 @@ def _members(
         untried = np.setdiff1d(untried, seeds)
         valid: list[int] = []
         best, best_weight = np.zeros(0, dtype=np.int64), 0.0
-        c_left, d_left = centre[left], direction[left]
+        c_left, d_left, w_left = centre[left], direction[left], weight[left]
         # The seeds' lines are grown side by side, as many at once as keep the arrays small.
         per_pass = max(1, MAX_SUPPORT_ENTRIES // len(left))
         for first in range(0, len(seeds), per_pass):
             at = np.searchsorted(left, seeds[first : first + per_pass])
-            c, d = _grown(at, c_left, d_left, weight[left], across_m, surfel_m)
+            c, d = _grown(at, c_left, d_left, w_left, across_m, surfel_m)
             support, along = _support(c_left, d_left, c, d, across_m)
             for k in range(len(at)):
                 on = left[support[k]]
