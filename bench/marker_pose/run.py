@@ -112,7 +112,8 @@ def timings() -> list[list[object]]:
     (graph and marginals); the same for 10,000 frames. Wall and CPU seconds (the machine is shared:
     CPU time is what the estimate itself costs)."""
     from tumblescan.marker_pose.graph import frame_covariances
-    from tumblescan.marker_pose.identify import Gates, associate
+    from tumblescan.marker_pose.identify import associate
+    from tumblescan.marker_pose.labelling import Gates
 
     rows: list[list[object]] = []
     estimate_poses(markers_from_json(simulate(SimConfig(frames=50), 1).document()))  # imports, once

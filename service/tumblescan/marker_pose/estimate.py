@@ -16,7 +16,8 @@ from .._typing import FloatArray, Progress, no_progress
 from .errors import InvalidOptionError
 from .geometry import launch_frame
 from .graph import GraphResult, auto_psd, frame_covariances, markers_graph, motion_graph, typical_sigma
-from .identify import Association, Gates, associate
+from .identify import Association, associate
+from .labelling import Gates
 from .layout import bootstrap_layout
 from .markers_io import MarkerInput
 from .options import MarkerPoseOptions

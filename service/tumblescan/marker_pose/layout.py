@@ -12,7 +12,8 @@ import numpy as np
 from .._typing import FloatArray
 from .errors import TooFewFramesError
 from .geometry import launch_frame
-from .identify import UNASSIGNED, Gates, associate
+from .identify import UNASSIGNED, associate
+from .labelling import Gates
 from .markers_io import MarkerInput
 
 SEED_WINDOW = 15  # frames over which seed tracks must keep their distances
