@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from tumblescan.spin_rate.rotation import los_angle_deg, rot, unit_from_angles
-from tumblescan.spin_rate.search import (
-    PLANE_LADDER_RATIO,
-    PLANE_TILTS_DEG,
-    best_of_starts,
-    plane_ladder_starts,
-)
+from tumblescan.spin_rate.search import best_of_starts
+from tumblescan.spin_rate.starts import PLANE_LADDER_RATIO, PLANE_TILTS_DEG, plane_ladder_starts
 
 from .test_robust_fit import synthetic_tracks
 

@@ -12,7 +12,8 @@ import pytest
 from tumblescan.spin_rate.association import reject_outliers
 from tumblescan.spin_rate.rigid import Observations, fit_rigid
 from tumblescan.spin_rate.rotation import rot, unit_from_angles
-from tumblescan.spin_rate.search import best_of_starts, centre_distance, scan_starts, with_drift_if_needed
+from tumblescan.spin_rate.search import best_of_starts, centre_distance, with_drift_if_needed
+from tumblescan.spin_rate.starts import scan_starts
 from tumblescan.spin_rate.tracking import reject_jumps
 
 F_PX = 1100.0

@@ -9,13 +9,8 @@ import numpy as np
 from tumblescan.spin_rate.association import reject_outliers
 from tumblescan.spin_rate.rigid import Observations, fit_rigid
 from tumblescan.spin_rate.rotation import rot, unit_from_angles
-from tumblescan.spin_rate.search import (
-    best_of_starts,
-    best_of_starts_without_strays,
-    line_angle_rate_rad_s,
-    los_start,
-    scan_starts,
-)
+from tumblescan.spin_rate.search import best_of_starts, best_of_starts_without_strays
+from tumblescan.spin_rate.starts import line_angle_rate_rad_s, los_start, scan_starts
 
 from .test_robust_fit import K, synthetic_tracks
 

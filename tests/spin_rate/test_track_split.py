@@ -8,7 +8,8 @@ import numpy as np
 from tumblescan.spin_rate.association import split_piecewise_tracks
 from tumblescan.spin_rate.rigid import Observations, fit_rigid
 from tumblescan.spin_rate.rotation import rot, unit_from_angles
-from tumblescan.spin_rate.search import best_of_starts, best_of_starts_without_strays, plane_ladder_starts
+from tumblescan.spin_rate.search import best_of_starts, best_of_starts_without_strays
+from tumblescan.spin_rate.starts import plane_ladder_starts
 
 F_PX = 1100.0
 K = np.array([[F_PX, 0.0, 256.0], [0.0, F_PX, 256.0], [0.0, 0.0, 1.0]])

@@ -19,14 +19,8 @@ from .result import AxisCandidate, FrameInfo, Quality, Spin, SpinResult, TrackOb
 from .rigid import Observations, RigidFit, fit_rigid
 from .rivals import peak_fits, rate_rivals, sigma_with_rivals
 from .rotation import los_angle_deg, mirror_twin, projected_angle_deg
-from .search import (
-    best_of_starts_without_strays,
-    common_costs,
-    los_start,
-    plane_ladder_starts,
-    scan_starts,
-    with_drift_if_needed,
-)
+from .search import best_of_starts_without_strays, common_costs, with_drift_if_needed
+from .starts import los_start, plane_ladder_starts, scan_starts
 from .tracking import TURNING_MIN_DEG
 
 MIN_TRACK_FRAMES = 3
@@ -125,7 +119,7 @@ def estimate_spin(
     if on_los is not None and w_lo <= on_los[0] <= w_hi:
         starts.append(on_los)
     # The image does not turn: the axis may lie near the image plane, where the scan ranks rates
-    # poorly; a ladder of rates with image-plane axes starts more fits (search.plane_ladder_starts).
+    # poorly; a ladder of rates with image-plane axes starts more fits (starts.plane_ladder_starts).
     plane = None if sense_hint else plane_ladder_starts(obs, w_lo, w_hi, c0, radius, t[0])
     clock["scan"] = time.perf_counter()
     # 6. Short rigid fits from each start (and their twins, and the leader at simple multiples of

@@ -16,7 +16,8 @@ import numpy as np
 from .._typing import FloatArray
 from ..numerics.parallel import parallel_map
 from .rigid import Observations, RigidFit, fit_rigid
-from .search import Start, axis_polished, common_costs, plane_axis_starts, restarted, same_basin
+from .search import axis_polished, common_costs, restarted, same_basin
+from .starts import Start, plane_axis_starts
 
 # A fit at a rate over RATE_RIVAL_MIN_REL off the winner's whose cost is within this Δχ² (the
 # twin's test) is a rival the data do not rule out (``rate_rivals``).
@@ -29,7 +30,7 @@ def peak_fits(
 ) -> list[RigidFit]:
     """Fits of ``obs`` started at each periodogram peak (rad/s) over ``RATE_RIVAL_MIN_REL`` from
     ``fit``'s rate, each from the image-plane axis the scan ranks best at that rate
-    (``search.plane_axis_starts``) and ``fit``'s centre, then restarted and axis-polished as the
+    (``starts.plane_axis_starts``) and ``fit``'s centre, then restarted and axis-polished as the
     search's near-plane finalists.
 
     The mask's outline turns with the body whatever the tracks do, so its periodogram peaks near the
