@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ..jobs.kind import InputForm, JobKind
 from ..jobs.registry import kinds
-from ..jobs.store import Job
+from ..jobs.tables import Job
 
 Status = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 DEFAULT_KIND = "linescan-motion"  # what a request without a kind means (the first kind served)

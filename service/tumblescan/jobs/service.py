@@ -15,7 +15,7 @@ from .artifacts import safe_name
 from .kind import FinishedJob, InputForm, JobKind, Submission
 from .registry import get_kind
 from .runtime import Runtime
-from .store import FINAL, Job, new_id
+from .tables import FINAL, Job, new_id
 
 log = logging.getLogger("tumblescan.service")
 REPORT_FILE = "report.html"

@@ -18,7 +18,7 @@ from ...io.json_text import parse_json
 from ...io.ply import read_ply
 from ...jobs.registry import get_kind
 from ...jobs.service import Upload
-from ...jobs.store import FINAL, Job
+from ...jobs.tables import FINAL, Job
 from ..deps import CallerDep, ServiceDep
 from ..schemas import (
     DEFAULT_KIND,

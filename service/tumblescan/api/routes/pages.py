@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
-from ...jobs.store import FINAL, Job
+from ...jobs.tables import FINAL, Job
 from ..deps import KEY_COOKIE, ServiceDep, get_caller
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
