@@ -2,7 +2,9 @@
 from opposite, so the rates' split is a direction of tiny curvature. Once Levenberg-Marquardt's
 damping (``lam diag H``) was on, it all but stopped the motion along that direction, and the small
 steps passed for convergence 10 bounds off the optimum; convergence is now judged by the
-Gauss-Newton step."""
+Gauss-Newton step. On another CPU (other rounding in the BLAS) every start then crept along the
+valley and ended 29 deg off: the steps are now taken in the rotation vectors, where the valley is
+straight (``step_coords``, tests/linescan/dense/test_step_coords.py)."""
 
 from __future__ import annotations
 

@@ -14,8 +14,9 @@ between the centroids, ``v_n`` the normals' tilt variances, and ``s`` a common s
 from the residuals. A centroid carries what its points say along the normal, so every point
 of a planar surfel enters the fit at the cost of one residual per partner frame. The fit
 minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
-Levenberg-Marquardt steps (kept only when they lower that cost), with correspondences
-re-found once points have moved and the surfels rebuilt after large steps.
+Levenberg-Marquardt steps (kept only when they lower that cost) taken in the spin and precession
+vectors (:mod:`.step_coords`), with correspondences re-found once points have moved and the
+surfels rebuilt after large steps.
 
 Correspondences and the residual model: :mod:`.matching`. Thin members (booms, truss wires)
 that make no planar surfel join from the second stage on, each hit's offset across its
@@ -48,6 +49,7 @@ from .covariance import patches, sandwich
 from .data import DenseData
 from .mapping import LineMapping
 from .matching import CAUCHY_C, Linearized, Matches, cauchy_cost, linearize, match, residuals, robust_sigma, weights
+from .step_coords import StepCoords
 from .surfels import Surfels, build_surfels
 
 ALL_FREE = tuple(range(N_PARAMS))
@@ -64,6 +66,8 @@ LM_FIRST_TIGHT = 1e-4
 LM_TIGHTEN = 10.0
 LM_RELAX = 3.0
 LM_TRIES = 10
+# The undamped step, then these shares of it, before any damping (_damped_step).
+GN_FRACTIONS = (1.0, 0.5, 0.25, 0.125)
 # Covariance clusters: patches of the target this share of its extent wide (see .covariance).
 CLUSTER_FRACTION = 1 / 10
 
@@ -172,7 +176,8 @@ def refine_dense(
     cfg = config or DenseConfig()
     sensor = noise or SensorNoise()
     free = SPIN_ONLY_FREE if spin_only else ALL_FREE
-    base = np.asarray(x0, dtype=float).copy()
+    # In the chart the steps are taken in (rates >= 0, the polar angles in [0, pi]): step_coords.
+    base = canonical_params(np.asarray(x0, dtype=float))
     rng = np.random.default_rng(seed)
     gauge = None
     if spin_only:
@@ -285,8 +290,13 @@ def _iterate(
         w, scale = weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
+        # Steps in the rotation vectors (a straight line along the valley of a nearly degenerate
+        # motion, a curve in the angles: step_coords), unless an axis is undefined.
+        coords = StepCoords(problem.free) if StepCoords(problem.free).usable(z) else None
+        if coords is not None:
+            rows = rows @ coords.dz_dy(z)
         H, g = rows.T @ rows, -rows.T @ (lin.r * sw)
-        taken = _damped_step(problem, z, H, g, lam, lin, scale, terms)
+        taken = _damped_step(problem, z, H, g, lam, lin, scale, terms, coords)
         if taken is None:
             break
         dz, lam, mapping = taken
@@ -329,22 +339,29 @@ def _damped_step(
     lin: Linearized,
     scale: float,
     terms: _Terms,
+    coords: StepCoords | None,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
-    last one) that lowers the Cauchy cost on these correspondences and members; None when none does."""
+    last one) that lowers the Cauchy cost on these correspondences and members; None when none does.
+    ``H`` and ``g`` are in the step coordinates ``coords`` (in ``z`` itself when None); the step
+    returned is in ``z``."""
     data = problem.data
     before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
     D = np.diag(np.diag(H))
     for _ in range(LM_TRIES):
         step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-        x = _on_gauge(problem, problem.full(z + step))
-        dz = x[list(problem.free)] - z
-        mapping = LineMapping(x, data.tau_s, problem.free)
-        r = terms.residuals(problem, mapping)
-        after = cauchy_cost(r / np.sqrt(lin.var), scale)
-        if after <= before:
-            relaxed = lam / LM_RELAX
-            return np.asarray(dz, dtype=float), relaxed if relaxed >= LM_FIRST_TIGHT else LM_START, mapping
+        # An undamped step that raises the cost is shortened before it is damped: damping turns
+        # it towards the gradient, off the floor of a valley that a shorter step stays on.
+        for fraction in GN_FRACTIONS if lam == 0 else (1.0,):
+            y = fraction * step
+            moved = z + y if coords is None else coords.z_of(coords.y_of(z) + y)
+            x = _on_gauge(problem, problem.full(moved))
+            mapping = LineMapping(x, data.tau_s, problem.free)
+            r = terms.residuals(problem, mapping)
+            if cauchy_cost(r / np.sqrt(lin.var), scale) <= before:
+                relaxed = lam / LM_RELAX
+                dz = np.asarray(x[list(problem.free)] - z, dtype=float)
+                return dz, relaxed if relaxed >= LM_FIRST_TIGHT else LM_START, mapping
         lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
     return None
 
