@@ -285,6 +285,7 @@ def _iterate(
     terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
     matched_at, matched_gate = mapping, gate
     lam = LM_START
+    vectors = StepCoords(problem.free)
     for _ in range(iterations):
         lin = terms.linearize(problem, mapping)
         w, scale = weights(lin)
@@ -292,7 +293,7 @@ def _iterate(
         rows = lin.J * sw[:, None]
         # Steps in the rotation vectors (a straight line along the valley of a nearly degenerate
         # motion, a curve in the angles: step_coords), unless an axis is undefined.
-        coords = StepCoords(problem.free) if StepCoords(problem.free).usable(z) else None
+        coords = vectors if vectors.usable(z) else None
         if coords is not None:
             rows = rows @ coords.dz_dy(z)
         H, g = rows.T @ rows, -rows.T @ (lin.r * sw)

@@ -6,11 +6,12 @@ unchanged), and mapped back to angles and rate exactly, so a step follows a stra
 ``V``. Why: when the spin and precession axes are nearly parallel or anti-parallel, the frames
 pin down the total rotation, ``S + P`` at ``T`` and its turn ``P x S``, much better than its
 split between spin and precession. The set of motions that fit equally well is then close to the
-straight line ``P = P_perp + mu (S + P)``, ``S = (S + P) - P`` in the vectors, but a curve along
-which the precession axis swings by tens of degrees in the angles. A Gauss-Newton step in the
-angles leaves that curve at once (on the box at 50 m, axes 11.5 deg from anti-parallel, even an
-eighth of the step raised the cost; the damped steps then crept 0.03 deg/s per step and stopped
-0.39 deg/s short after 36); in the vectors the refinement reached the optimum in 7 steps.
+straight line ``P' = P + mu (S + P)``, ``S' = (S + P) - P'`` in the vectors (both keep ``S + P``
+and ``P x S``), but a curve along which the precession axis swings by tens of degrees in the
+angles. A Gauss-Newton step in the angles leaves that curve at once (on the box at 50 m, axes
+11.5 deg from anti-parallel, even an eighth of the step raised the cost; the damped steps then
+crept 0.03 deg/s per step and stopped 0.39 deg/s short after 36); in the vectors the refinement
+came within 2 sigmas of the optimum in 8 steps.
 A vector of zero rate has no axis: there the step stays in ``x`` (:meth:`StepCoords.usable`).
 """
 
@@ -74,9 +75,10 @@ class StepCoords:
         """``dz / dy`` at ``z`` (square, the size of ``z``), for ``z`` in the chart of
         :meth:`z_of`: ``a = atan2(V_y, V_x)``, ``b = atan2(|V_xy|, V_z)``, ``w = |V|``."""
         M = np.eye(len(z))
+        y = self.y_of(z)
         for idx in self._blocks:
-            a, b, w = z[idx]
-            vx, vy, vz = w * axis_from_angles(a, b)
+            vx, vy, vz = y[idx]
+            w = z[idx[2]]
             rxy2 = vx * vx + vy * vy
             rxy = np.sqrt(rxy2)
             M[np.ix_(idx, idx)] = [
