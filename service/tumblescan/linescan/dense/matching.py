@@ -123,3 +123,28 @@ def weights(lin: Linearized) -> tuple[FloatArray, float]:
     e = lin.r / np.sqrt(lin.var)
     scale = max(robust_sigma(e), 1e-12)
     return cauchyweights(e, scale) / lin.var, scale
+
+
+def partners(
+    data: DenseData, src: IntArray, rng: np.random.Generator, *, window: int | None, k: int
+) -> tuple[IntArray, IntArray]:
+    """``k`` random other frames for each source surfel (within ``window`` frames of its own, if
+    given): the pairs as parallel arrays ``(source, partner frame)``."""
+    F = data.n_frames
+    reach = F - 1 if window is None else min(window, F - 1)
+    own = data.cell_frame[src]
+    if window is None and k >= F - 1:
+        # Every other frame, in order: nothing left to chance.
+        b = (own[:, None] + np.arange(1, F)[None, :]) % F
+        return np.repeat(src, F - 1), b.ravel()
+    offsets = np.concatenate([-np.arange(reach, 0, -1), np.arange(1, reach + 1)])
+    out_src, out_partner = [], []
+    for _ in range(min(k, 2 * reach)):
+        b = own + offsets[rng.integers(0, len(offsets), len(src))]
+        # Offsets past either end fold back inside (a frame never pairs with itself).
+        b = np.where(b < 0, -b, b)
+        b = np.where(b >= F, 2 * (F - 1) - b, b)
+        ok = (b != own) & (b >= 0) & (b < F)
+        out_src.append(src[ok])
+        out_partner.append(b[ok])
+    return np.concatenate(out_src), np.concatenate(out_partner)

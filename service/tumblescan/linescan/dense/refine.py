@@ -14,8 +14,8 @@ between the centroids, ``v_n`` the normals' tilt variances, and ``s`` a common s
 from the residuals. A centroid carries what its points say along the normal, so every point
 of a planar surfel enters the fit at the cost of one residual per partner frame. The fit
 minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
-Levenberg-Marquardt steps (kept only when they lower that cost) taken in the spin and precession
-vectors (:mod:`.step_coords`), with correspondences re-found once points have moved and the
+Levenberg-Marquardt steps (kept only when they lower that cost: :mod:`.damping`) taken in the spin
+and precession vectors (:mod:`.step_coords`), with correspondences re-found once points have moved and the
 surfels rebuilt after large steps.
 
 Correspondences and the residual model: :mod:`.matching`. Thin members (booms, truss wires)
@@ -46,9 +46,21 @@ from ..sensor import SensorNoise
 from ..validation import canonical_cov
 from .beams import Beams, beam_rows, find_beams
 from .covariance import patches, sandwich
+from .damping import LM_START, damped_step
 from .data import DenseData
 from .mapping import LineMapping
-from .matching import CAUCHY_C, Linearized, Matches, cauchy_cost, linearize, match, residuals, robust_sigma, weights
+from .matching import (
+    CAUCHY_C,
+    Linearized,
+    Matches,
+    cauchy_cost,
+    linearize,
+    match,
+    partners,
+    residuals,
+    robust_sigma,
+    weights,
+)
 from .step_coords import StepCoords
 from .surfels import Surfels, build_surfels
 
@@ -58,16 +70,6 @@ SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
 SURFEL_REFRESH = 0.25
 REMATCH = 0.05
 PROBE_POINTS = 2000
-# Levenberg-Marquardt damping: start undamped, tighten on a rise of the cost, relax on success, and
-# undamped again once relaxed below the first tightening (a damping that lingers at 1e-6 of the
-# diagonal still crawls along a nearly degenerate direction).
-LM_START = 0.0
-LM_FIRST_TIGHT = 1e-4
-LM_TIGHTEN = 10.0
-LM_RELAX = 3.0
-LM_TRIES = 10
-# The undamped step, then these shares of it, before any damping (_damped_step).
-GN_FRACTIONS = (1.0, 0.5, 0.25, 0.125)
 # Covariance clusters: patches of the target this share of its extent wide (see .covariance).
 CLUSTER_FRACTION = 1 / 10
 
@@ -195,11 +197,11 @@ def refine_dense(
     cells = np.arange(len(data.cell_frame), dtype=np.int64)
     stages = [
         # 1. Neighbouring frames only: right correspondences even from a rough start.
-        (_partners(data, cells, rng, window=cfg.near_window, k=1), cfg.max_iterations),
+        (partners(data, cells, rng, window=cfg.near_window, k=1), cfg.max_iterations),
         # 2. Any frame: long baselines pin the rates down.
-        (_partners(data, cells, rng, window=None, k=cfg.partners), cfg.max_iterations),
+        (partners(data, cells, rng, window=None, k=cfg.partners), cfg.max_iterations),
         # 3. More partners from the converged start: each brings its own target noise.
-        (_partners(data, cells, rng, window=None, k=cfg.fine_partners), cfg.fine_iterations),
+        (partners(data, cells, rng, window=None, k=cfg.fine_partners), cfg.fine_iterations),
     ]
     gate = max(data.extent_m / 20, 5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
     # Thin members join from the second stage on: at T their strips line up only once the
@@ -225,31 +227,6 @@ def refine_dense(
         )
     assert terms is not None
     return _finish(problem, z, terms, step)
-
-
-def _partners(
-    data: DenseData, src: IntArray, rng: np.random.Generator, *, window: int | None, k: int
-) -> tuple[IntArray, IntArray]:
-    """``k`` random other frames for each source surfel (within ``window`` frames of its own, if
-    given): the pairs as parallel arrays ``(source, partner frame)``."""
-    F = data.n_frames
-    reach = F - 1 if window is None else min(window, F - 1)
-    own = data.cell_frame[src]
-    if window is None and k >= F - 1:
-        # Every other frame, in order: nothing left to chance.
-        b = (own[:, None] + np.arange(1, F)[None, :]) % F
-        return np.repeat(src, F - 1), b.ravel()
-    offsets = np.concatenate([-np.arange(reach, 0, -1), np.arange(1, reach + 1)])
-    out_src, out_partner = [], []
-    for _ in range(min(k, 2 * reach)):
-        b = own + offsets[rng.integers(0, len(offsets), len(src))]
-        # Offsets past either end fold back inside (a frame never pairs with itself).
-        b = np.where(b < 0, -b, b)
-        b = np.where(b >= F, 2 * (F - 1) - b, b)
-        ok = (b != own) & (b >= 0) & (b < F)
-        out_src.append(src[ok])
-        out_partner.append(b[ok])
-    return np.concatenate(out_src), np.concatenate(out_partner)
 
 
 def _iterate(
@@ -342,29 +319,23 @@ def _damped_step(
     terms: _Terms,
     coords: StepCoords | None,
 ) -> tuple[FloatArray, float, LineMapping] | None:
-    """Levenberg-Marquardt: the step ``(H + lam diag H)^-1 g`` with the smallest ``lam`` (from the
-    last one) that lowers the Cauchy cost on these correspondences and members; None when none does.
+    """The Levenberg-Marquardt step (:func:`.damping.damped_step`) that lowers the Cauchy cost on
+    these correspondences and members, as ``(dz, next damping, mapping)``; None when none does.
     ``H`` and ``g`` are in the step coordinates ``coords`` (in ``z`` itself when None); the step
     returned is in ``z``."""
     data = problem.data
-    before = cauchy_cost(lin.r / np.sqrt(lin.var), scale)
-    D = np.diag(np.diag(H))
-    for _ in range(LM_TRIES):
-        step = np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-        # An undamped step that raises the cost is shortened before it is damped: damping turns
-        # it towards the gradient, off the floor of a valley that a shorter step stays on.
-        for fraction in GN_FRACTIONS if lam == 0 else (1.0,):
-            y = fraction * step
-            moved = z + y if coords is None else coords.z_of(coords.y_of(z) + y)
-            x = _on_gauge(problem, problem.full(moved))
-            mapping = LineMapping(x, data.tau_s, problem.free)
-            r = terms.residuals(problem, mapping)
-            if cauchy_cost(r / np.sqrt(lin.var), scale) <= before:
-                relaxed = lam / LM_RELAX
-                dz = np.asarray(x[list(problem.free)] - z, dtype=float)
-                return dz, relaxed if relaxed >= LM_FIRST_TIGHT else LM_START, mapping
-        lam = max(lam * LM_TIGHTEN, LM_FIRST_TIGHT)
-    return None
+
+    def trial(y: FloatArray) -> tuple[float, tuple[FloatArray, LineMapping]]:
+        moved = z + y if coords is None else coords.z_of(coords.y_of(z) + y)
+        x = _on_gauge(problem, problem.full(moved))
+        mapping = LineMapping(x, data.tau_s, problem.free)
+        return cauchy_cost(terms.residuals(problem, mapping) / np.sqrt(lin.var), scale), (x, mapping)
+
+    taken = damped_step(H, g, lam, cauchy_cost(lin.r / np.sqrt(lin.var), scale), trial)
+    if taken is None:
+        return None
+    lam, (x, mapping) = taken
+    return np.asarray(x[list(problem.free)] - z, dtype=float), lam, mapping
 
 
 def _probe(data: DenseData) -> IntArray:
