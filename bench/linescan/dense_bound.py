@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from tumblescan import Motion, Scene
 from tumblescan.geometry.rotations import axis_from_angles
 from tumblescan.linescan.dense.data import DenseData, prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import Linearized, Matches, linearize, match
 from tumblescan.linescan.dense.registration import extent_m
@@ -345,9 +345,8 @@ def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s:
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
     tau = sim.t_s - reference_time_s
     noise = scene.scanner.noise
-    data = prepare(
-        sim.xyz_m, tau, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION, range_sigma_m=noise.range_sigma_m
-    )
+    surfel_m = surfel_size_m(extent_m(per_frame), noise.range_sigma_m)
+    data = prepare(sim.xyz_m, tau, frame, surfel_m=surfel_m, range_sigma_m=noise.range_sigma_m)
     mapping = LineMapping(motion.at_reference(reference_time_s).params(), data.tau_s, tuple(range(9)))
     used = np.zeros(len(sim.xyz_m), dtype=bool)
     kept = np.ones(len(used), dtype=bool) if data.kept is None else data.kept

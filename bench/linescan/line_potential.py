@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
 from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData, prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS, flat_cells
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.members import _line_shape, _moments
@@ -252,7 +252,7 @@ def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> li
     """One motion's class shares and bounds (rows of the printed tables)."""
     motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
     noise = scene.scanner.noise
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
                    range_sigma_m=noise.range_sigma_m)  # fmt: skip
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
     surf = build_surfels(data, mapping, noise)
@@ -348,8 +348,8 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     try:
         for step in steps:
             data_module.MAX_RANGE_STEP = step
-            data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                           range_sigma_m=noise.range_sigma_m)  # fmt: skip
+            surfel_m = surfel_size_m(extent_m(per_frame), noise.range_sigma_m)
+            data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_m, range_sigma_m=noise.range_sigma_m)
             mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
             surf = build_surfels(data, mapping, noise)
             kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept

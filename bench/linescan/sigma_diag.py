@@ -34,7 +34,7 @@ from tumblescan.linescan.dense import covariance as covariance_mod
 from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
 from tumblescan.linescan.dense.data import prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.linescan.validation import canonical_cov
@@ -357,7 +357,7 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
         T = float(sim.t_s.min())
         per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
         noise = scene.scanner.noise
-        data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+        data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
                        range_sigma_m=noise.range_sigma_m)  # fmt: skip
         x_true = canonical_params(motion.at_reference(T).params())
         rec: dict[str, Any] = {}

@@ -7,7 +7,7 @@ import numpy as np
 
 from tumblescan import Motion, Scene, simulate_frames
 from tumblescan.linescan.dense.data import DenseData, prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.simulate import FrameCloud
@@ -21,6 +21,7 @@ def frames_at_truth(motion: Motion, scene: Scene, noise_seed: int) -> tuple[Fram
     frame = sim.frame.astype(np.int64)
     T = float(sim.t_s.min())
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
-                   range_sigma_m=scene.scanner.noise.range_sigma_m)  # fmt: skip
+    sigma_m = scene.scanner.noise.range_sigma_m
+    surfel_m = surfel_size_m(extent_m(per_frame), sigma_m)
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_m, range_sigma_m=sigma_m)
     return sim, data, LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))

@@ -10,7 +10,7 @@ from bench.linescan.line_potential import beam_of_hits, classify, line_informati
 
 from tumblescan import Motion, Scanner, Scene, simulate_frames
 from tumblescan.linescan.dense.data import prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import build_surfels
@@ -132,7 +132,7 @@ def test_the_wires_left_out_are_mostly_linear_cells() -> None:
     noise = scene.scanner.noise
     frame = sim.frame.astype(np.int64)
     per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
                    range_sigma_m=noise.range_sigma_m)  # fmt: skip
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
     surf = build_surfels(data, mapping, noise)

@@ -12,7 +12,7 @@ from bench.linescan.line_potential import beam_of_hits
 from tumblescan import FramesOptions, Motion, Scanner, Scene, TimedCloud, estimate_from_frames, simulate_frames
 from tumblescan.linescan.dense.beams import Beams, _frame_shrink, _shrinks, beam_rows, find_beams
 from tumblescan.linescan.dense.data import DenseData, prepare
-from tumblescan.linescan.dense.estimate import SURFEL_FRACTION
+from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.members import fit_line, sights
 from tumblescan.linescan.dense.registration import extent_m
@@ -42,7 +42,7 @@ def _found(shape: str, noise: bool = True) -> tuple[Motion, Scene, FrameCloud, D
         sim.xyz_m,
         sim.t_s - T,
         frame,
-        surfel_m=extent_m(per_frame) * SURFEL_FRACTION,
+        surfel_m=surfel_size_m(extent_m(per_frame), sensor.range_sigma_m),
         range_sigma_m=sensor.range_sigma_m,
     )
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))

@@ -8,6 +8,7 @@ import pytest
 
 from tumblescan.linescan.dense import surfels as surfels_module
 from tumblescan.linescan.dense.data import SPURIOUS_MIN_SHARE, DenseData, prepare
+from tumblescan.linescan.dense.estimate import SURFEL_FRACTION, surfel_size_m
 from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.surfels import Surfels, build_surfels
@@ -311,3 +312,19 @@ def test_cells_reaching_over_a_panels_thin_edge_are_not_used(monkeypatch: pytest
     without = strays_and_used()
     assert without[0] > 0.15 and with_rules[0] < 0.5 * without[0], (with_rules, without)
     assert with_rules[1] > 0.7 and with_rules[1] > without[1] - 0.12, (with_rules, without)
+
+
+def test_a_face_seen_head_on_is_planar_at_the_estimators_cell_size() -> None:
+    # Seen head-on, a face's range noise lies along its normal: in cells of extent / 100 on this
+    # 5 m wall (7 cm, under 4 range sigmas) the noise makes a cell about as thick as it is wide,
+    # and the flatness test leaves most of them out. The estimator's cells are at least
+    # SURFEL_MIN_RANGE_SIGMAS range sigmas wide.
+    xyz, tau, _ = _wall(0.0, seed=4)
+    extent = float(np.linalg.norm(np.ptp(xyz, axis=0)))
+    x = np.array([0.3, 0.2, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 50.0])
+    share = {}
+    for label, surfel_m in (("extent / 100", extent * SURFEL_FRACTION), ("estimator", surfel_size_m(extent, 0.02))):
+        data = prepare(xyz, tau, np.zeros(len(xyz), np.int64), surfel_m=surfel_m)
+        surf = build_surfels(data, LineMapping(x, data.tau_s, tuple(range(9))), NOISE)
+        share[label] = float(np.mean(surf.planar[surf.point_cell]))
+    assert share["extent / 100"] < 0.3 < 0.75 < share["estimator"], share

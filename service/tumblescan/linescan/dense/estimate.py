@@ -40,6 +40,12 @@ from .registration import VOXEL_FRACTION, extent_m, register_consecutive
 # Registration works on a thinned copy of each frame: this many points at most.
 REGISTRATION_POINTS = 60_000
 SURFEL_FRACTION = 1 / 100
+# Nor narrower than this many range sigmas: a face seen head-on has its range noise along its
+# normal, and a cell narrower than about sqrt(12 / MAX_FLATNESS) = 6.3 of them looks no flatter
+# than it is wide (faces.flat_cells). Seen: the long array at 50 m, seed 23, whose frames see it
+# end-on (extent 9 m, cells of 9 cm): 52 % of the points in planar cells at the true motion,
+# most of a frame's face-on cells out; with cells of 12 cm, 78 %.
+SURFEL_MIN_RANGE_SIGMAS = 6.0
 
 
 def estimate_from_frames(
@@ -85,7 +91,7 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
         cloud.xyz_m,
         cloud.t_s - T,
         frames.frame,
-        surfel_m=opts.dense.surfel_m or extent * SURFEL_FRACTION,
+        surfel_m=opts.dense.surfel_m or surfel_size_m(extent, noise.range_sigma_m),
         range_sigma_m=noise.range_sigma_m,
     )
     # 2-3. Register, initialize and refine on all frames, from up to three starts.
@@ -197,3 +203,9 @@ def _result(
             "warnings": warnings,
         }
     )
+
+
+def surfel_size_m(extent_m: float, range_sigma_m: float) -> float:
+    """The surfel (cell) size for a target ``extent_m`` across (metres) seen with range noise
+    ``range_sigma_m``: ``extent / 100``, and at least ``SURFEL_MIN_RANGE_SIGMAS`` range sigmas."""
+    return max(extent_m * SURFEL_FRACTION, SURFEL_MIN_RANGE_SIGMAS * range_sigma_m)
