@@ -41,17 +41,17 @@ from numpy.typing import NDArray
 
 from tumblescan import Motion, Scene
 from tumblescan.geometry.rotations import axis_from_angles
-from tumblescan.linescan.dense.data import DenseData, prepare
-from tumblescan.linescan.dense.estimate import surfel_size_m
+from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import Linearized, Matches, linearize, match
-from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import Surfels, build_surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import axis_sigma_rad
 from tumblescan.target.motion import apply_rotation
 from tumblescan.target.shape import SatelliteShape
+
+from .truth import dense_data
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -339,14 +339,10 @@ def share_within(
 
 def fitted_hits(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_s: float) -> NDArray[np.bool_]:
     """The hits the dense fit can use: those in planar surfels, built as the estimator builds
-    them (cells of extent / 100) at the true motion, with the points of cells across edges handed
-    to their faces' surfels. The rest lie along edges of faces and of the view, or on booms."""
-    frame = sim.frame.astype(np.int64)
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    tau = sim.t_s - reference_time_s
+    them (cells of its size) at the true motion, with the points of cells across edges handed to
+    their faces' surfels. The rest lie along edges of faces and of the view, or on booms."""
     noise = scene.scanner.noise
-    surfel_m = surfel_size_m(extent_m(per_frame), noise.range_sigma_m)
-    data = prepare(sim.xyz_m, tau, frame, surfel_m=surfel_m, range_sigma_m=noise.range_sigma_m)
+    data = dense_data(sim, reference_time_s, noise.range_sigma_m)
     mapping = LineMapping(motion.at_reference(reference_time_s).params(), data.tau_s, tuple(range(9)))
     used = np.zeros(len(sim.xyz_m), dtype=bool)
     kept = np.ones(len(used), dtype=bool) if data.kept is None else data.kept

@@ -42,12 +42,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Motion, Scanner, Scene, random_motion, simulate_frames
-from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData, prepare
-from tumblescan.linescan.dense.estimate import surfel_size_m
+from tumblescan.linescan.dense.data import MAX_RANGE_STEP, DenseData
 from tumblescan.linescan.dense.faces import SIDE_NEIGHBOURS, flat_cells
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.members import _line_shape, _moments
-from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import _cell_moments, _noise_free_normals, build_surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
@@ -56,6 +54,7 @@ from tumblescan.target.motion import apply_rotation
 from ..common import table
 from .dense_bound import _body_frame, dense_bound, face_of_hits
 from .real_shapes import shape_named
+from .truth import dense_data
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -235,25 +234,20 @@ def line_information(motion: Motion, scene: Scene, sim: FrameCloud, T: float, be
     return np.asarray(info - absorbed)
 
 
-def _simulated(
-    name: str, distance_m: float, seed: int, size: int
-) -> tuple[Motion, Scene, FrameCloud, NDArray[np.int64], float, list[NDArray[np.float64]]]:
-    """One seeded motion of shape ``name`` and its frames: (motion, scene, simulation, frame index per
-    hit, the first hit's time T in s, each frame's hits in m)."""
+def _simulated(name: str, distance_m: float, seed: int, size: int) -> tuple[Motion, Scene, FrameCloud, float]:
+    """One seeded motion of shape ``name`` and its frames: (motion, scene, simulation, the first
+    hit's time T in s)."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
     sim = simulate_frames(motion, scene, seed=seed)
-    frame = sim.frame.astype(np.int64)
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    return motion, scene, sim, frame, float(sim.t_s.min()), per_frame
+    return motion, scene, sim, float(sim.t_s.min())
 
 
 def case(name: str, distance_m: float, seed: int, size: int, ratio: float) -> list[list[object]]:
     """One motion's class shares and bounds (rows of the printed tables)."""
-    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
+    motion, scene, sim, T = _simulated(name, distance_m, seed, size)
     noise = scene.scanner.noise
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
-                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
+    data = dense_data(sim, T, noise.range_sigma_m)
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
     surf = build_surfels(data, mapping, noise)
     n = len(sim.xyz_m)
@@ -339,7 +333,7 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     neighbours on the cell's plane; docs/linescan.md.)"""
     from tumblescan.linescan.dense import data as data_module
 
-    motion, scene, sim, frame, T, per_frame = _simulated(name, distance_m, seed, size)
+    motion, scene, sim, T = _simulated(name, distance_m, seed, size)
     noise = scene.scanner.noise
     faces = face_of_hits(scene, motion, sim.reference_m)
     b_all = dense_bound(motion, scene, sim, T, faces=faces)
@@ -348,8 +342,7 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     try:
         for step in steps:
             data_module.MAX_RANGE_STEP = step
-            surfel_m = surfel_size_m(extent_m(per_frame), noise.range_sigma_m)
-            data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_m, range_sigma_m=noise.range_sigma_m)
+            data = dense_data(sim, T, noise.range_sigma_m)
             mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
             surf = build_surfels(data, mapping, noise)
             kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept

@@ -33,9 +33,6 @@ from tumblescan.geometry.rotations import axis_from_angles
 from tumblescan.linescan.dense import covariance as covariance_mod
 from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
-from tumblescan.linescan.dense.data import prepare
-from tumblescan.linescan.dense.estimate import surfel_size_m
-from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.linescan.validation import canonical_cov
 from tumblescan.target.motion import N_PARAMS, canonical_params
@@ -43,7 +40,7 @@ from tumblescan.target.motion import N_PARAMS, canonical_params
 from ..common import out_dir, table
 from .dense import errors
 from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
-from .truth import frames_at_truth
+from .truth import dense_data, frames_at_truth
 
 
 def _tangent(x: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -353,12 +350,9 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
     for k in [*range(n_draws), -1]:
         scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name), noise=k >= 0)
         sim = simulate_frames(motion, scene, seed=seed + 1000 * max(k, 0))
-        frame = sim.frame.astype(np.int64)
         T = float(sim.t_s.min())
-        per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
         noise = scene.scanner.noise
-        data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
-                       range_sigma_m=noise.range_sigma_m)  # fmt: skip
+        data = dense_data(sim, T, noise.range_sigma_m)
         x_true = canonical_params(motion.at_reference(T).params())
         rec: dict[str, Any] = {}
         patches = refine_mod.patches

@@ -7,12 +7,10 @@ from functools import cache
 import numpy as np
 from bench.linescan.dense_bound import dense_bound, face_of_hits, fitted_hits
 from bench.linescan.line_potential import beam_of_hits, classify, line_information, line_rows
+from bench.linescan.truth import dense_data
 
 from tumblescan import Motion, Scanner, Scene, simulate_frames
-from tumblescan.linescan.dense.data import prepare
-from tumblescan.linescan.dense.estimate import surfel_size_m
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import build_surfels
 from tumblescan.linescan.sensor import perpendiculars
 from tumblescan.linescan.simulate import FrameCloud
@@ -130,10 +128,7 @@ def test_lines_add_information_to_the_used_hits_bound() -> None:
 def test_the_wires_left_out_are_mostly_linear_cells() -> None:
     motion, scene, sim, T = _truss()
     noise = scene.scanner.noise
-    frame = sim.frame.astype(np.int64)
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
-    data = prepare(sim.xyz_m, sim.t_s - T, frame, surfel_m=surfel_size_m(extent_m(per_frame), noise.range_sigma_m),
-                   range_sigma_m=noise.range_sigma_m)  # fmt: skip
+    data = dense_data(sim, T, noise.range_sigma_m)
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
     surf = build_surfels(data, mapping, noise)
     planar_pt = surf.planar[surf.point_cell]

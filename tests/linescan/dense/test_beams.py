@@ -8,14 +8,13 @@ from functools import cache
 import numpy as np
 from bench.linescan.dense import errors
 from bench.linescan.line_potential import beam_of_hits
+from bench.linescan.truth import dense_data
 
 from tumblescan import FramesOptions, Motion, Scanner, Scene, TimedCloud, estimate_from_frames, simulate_frames
 from tumblescan.linescan.dense.beams import Beams, _frame_shrink, _shrinks, beam_rows, find_beams
-from tumblescan.linescan.dense.data import DenseData, prepare
-from tumblescan.linescan.dense.estimate import surfel_size_m
+from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.members import fit_line, sights
-from tumblescan.linescan.dense.registration import extent_m
 from tumblescan.linescan.dense.surfels import build_surfels
 from tumblescan.linescan.frames import assemble_frames
 from tumblescan.linescan.options import DenseConfig
@@ -35,16 +34,8 @@ def _found(shape: str, noise: bool = True) -> tuple[Motion, Scene, FrameCloud, D
     scene = Scene(scanner=Scanner(lines=512, pixels=512), shape=target, noise=noise)
     sim = simulate_frames(motion, scene, seed=5)
     T = float(sim.t_s.min())
-    frame = sim.frame.astype(np.int64)
-    per_frame = [sim.xyz_m[frame == f] for f in range(int(frame.max()) + 1)]
     sensor = scene.scanner.noise
-    data = prepare(
-        sim.xyz_m,
-        sim.t_s - T,
-        frame,
-        surfel_m=surfel_size_m(extent_m(per_frame), sensor.range_sigma_m),
-        range_sigma_m=sensor.range_sigma_m,
-    )
+    data = dense_data(sim, T, sensor.range_sigma_m)
     mapping = LineMapping(motion.at_reference(T).params(), data.tau_s, tuple(range(9)))
     surf = build_surfels(data, mapping, sensor)
     return motion, scene, sim, data, mapping, find_beams(data, mapping, surf, sensor)

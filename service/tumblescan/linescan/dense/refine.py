@@ -14,9 +14,9 @@ between the centroids, ``v_n`` the normals' tilt variances, and ``s`` a common s
 from the residuals. A centroid carries what its points say along the normal, so every point
 of a planar surfel enters the fit at the cost of one residual per partner frame. The fit
 minimizes the Cauchy loss of ``r / sqrt(var r)`` over the 9 motion parameters by
-Levenberg-Marquardt steps (kept only when they lower that cost: :mod:`.damping`) taken in the spin
-and precession vectors (:mod:`.step_coords`), with correspondences re-found once points have moved and the
-surfels rebuilt after large steps.
+Levenberg-Marquardt steps (kept only when they lower that cost: :mod:`.damping`) taken in the
+spin and precession vectors (:mod:`.step_coords`), with correspondences re-found once points
+have moved and the surfels rebuilt after large steps.
 
 Correspondences and the residual model: :mod:`.matching`. Thin members (booms, truss wires)
 that make no planar surfel join from the second stage on, each hit's offset across its
