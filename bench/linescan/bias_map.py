@@ -4,14 +4,18 @@
                                       [--variant true-tube-normals|curvature-64|no-handover]
 
 At the true motion, for several noise draws of one motion (noise seeds ``seed + 1000 k``): the
-surfels and the last stage's matches as the refinement builds them, and one Cauchy-weighted
-Gauss-Newton step from the truth, ``dx = A^-1 J^T W r`` (``W`` the Cauchy weights at unit scale
-over the residuals' variances). Its mean over the draws is the fit's bias to first order; its
-RMS, the bias and the noise together. Each patch of the target (the covariance's clusters:
-cubes of a tenth of the extent) contributes ``A^-1 J_p^T W_p r_p``; a patch whose contribution
-keeps its sign in every draw (mean about as large as the mean of its magnitudes) is a bias of
-that part of the surface. Sizes are in units of the dense bound (``dense_bound.py``), per
-parameter (spin axis, spin rate, precession axis, precession rate).
+surfels and the last stage's matches as the refinement builds them, and one Newton step of the
+Cauchy cost from the truth, ``dx = H^-1 J^T W r`` (``W`` the Cauchy weights at unit scale over
+the residuals' variances, ``H = J^T diag(rho''(e) / var) J`` the cost's Hessian). Its mean over
+the draws is the fit's bias to first order; its RMS, the bias and the noise together. (The
+reweighted step ``(J^T W J)^-1 J^T W r`` stops short of the optimum the whole fit converges to:
+its weights ``rho'(e) / e`` exceed ``rho''(e)``, by about 25 % on these residuals, and before
+2026-11-29 this bench understated the steps by as much; see ``loss_choice.py``.) Each patch of
+the target (the covariance's clusters: cubes of a tenth of the extent) contributes ``H^-1 J_p^T
+W_p r_p``; a patch whose contribution keeps its sign in every draw (mean about as large as the
+mean of its magnitudes) is a bias of that part of the surface. Sizes are in units of the dense
+bound (``dense_bound.py``), per parameter (spin axis, spin rate, precession axis, precession
+rate).
 
 ``--variant`` measures one change of the surfels against the same draws (the steps of both are
 printed): ``true-tube-normals`` (the telescope only) puts the tube's true normals (radial from its
@@ -37,10 +41,10 @@ import numpy as np
 from tumblescan import Motion, Scanner, Scene, random_motion
 from tumblescan.linescan.dense import curvature as curvature_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
-from tumblescan.linescan.dense.covariance import patches
+from tumblescan.linescan.dense.covariance import cauchy_curvature, patches
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.matching import cauchyweights
+from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights
 from tumblescan.linescan.dense.surfels import Surfels, _facing_sensor
 from tumblescan.linescan.validation import canonical_cov
 from tumblescan.target.shapes import TelescopeShape
@@ -132,7 +136,7 @@ def steps(
         mt, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
         e = lin.r / np.sqrt(lin.var)
         w = cauchyweights(e, 1.0) / lin.var
-        Ainv = np.linalg.inv(lin.J.T @ (lin.J * w[:, None]))
+        Ainv = np.linalg.inv(lin.J.T @ (lin.J * (cauchy_curvature(e, CAUCHY_C) / lin.var)[:, None]))
         totals.append(Ainv @ (lin.J.T @ (w * lin.r)))
         anchor_T = mapping.apply(surf.anchor_obs[mt.src], surf.line[mt.src])
         cube = data.extent_m / 10

@@ -25,7 +25,7 @@ import argparse
 import numpy as np
 
 from tumblescan import Motion, Scanner, Scene, random_motion
-from tumblescan.linescan.dense.covariance import patches, sandwich
+from tumblescan.linescan.dense.covariance import cauchy_curvature, patches, sandwich
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
@@ -59,7 +59,8 @@ def analyse(
     rows/cols/coef: residual ``rows[k]`` holds ``coef[k]`` times surfel ``cols[k]``'s anchor noise
     (variance ``d``); ``indep``: each residual's own independent variance (the normals' tilt).
     ``claimed``: ``s^2 A^-1`` (residuals independent); ``true``: under the surfels' noise alone;
-    ``step``: least squares from the truth; ``robust``: the Cauchy-weighted step, as the fit's."""
+    ``step``: least squares from the truth; ``robust``: the Cauchy cost's Newton step from the truth
+    (where the fit converges, to first order)."""
     w = 1.0 / var
     A = J.T @ (J * w[:, None])
     Ainv = np.linalg.inv(A)
@@ -70,7 +71,8 @@ def analyse(
     e = r / np.sqrt(var)
     s = robust_sigma(e)
     wr = cauchyweights(e, s) * w
-    Ar = J.T @ (J * wr[:, None])
+    # The cost's Hessian, not the reweighted steps' matrix: the fit converges to its optimum.
+    Ar = J.T @ (J * (cauchy_curvature(e, CAUCHY_C * s) * w)[:, None])
     return {
         "claimed": s**2 * Ainv,
         "true": Ainv @ B @ Ainv,
