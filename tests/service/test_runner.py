@@ -1,7 +1,12 @@
-"""A store outage during a job costs progress notes, never the job or its result."""
+"""A store outage during a job costs progress notes, never the job or its result; a shutdown
+interrupt puts the job back in the queue, whatever its libraries made of it."""
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -9,7 +14,7 @@ from typing import Any
 import pytest
 from sqlalchemy.exc import OperationalError
 
-from tumblescan.jobs import runner
+from tumblescan.jobs import queue, runner
 from tumblescan.jobs.artifacts import ArtifactStore
 from tumblescan.jobs.kind import JobContext, JobOutput
 from tumblescan.jobs.runtime import Runtime
@@ -179,3 +184,57 @@ def test_files_deleted_but_not_marked_so_still_end_the_job_cancelled(
     assert outcome == "cancelled"
     job = rt.store.get(job_id)
     assert job is not None and job.status == "cancelled"
+
+
+class SchemaBuildError(Exception):
+    """What pydantic-core raised when the shutdown interrupt reached it building a schema."""
+
+
+def test_a_job_interrupted_by_shutdown_goes_back_to_the_queue_whatever_its_libraries_raise(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The consumer stops a running job by raising KeyboardInterrupt in it; a library turned that
+    # into an error of its own, and the job failed. Noted as a shutdown, it leaves as the
+    # interrupt, still running, for huey's signal to put it back in the queue.
+    monkeypatch.setattr(runner, "SHUTTING_DOWN", threading.Event())
+    kind = CountingKind(SchemaBuildError("Error building 'literal' validator: KeyboardInterrupt"))
+    rt, job_id = setup(tmp_path, monkeypatch, kind)
+    kind.meanwhile = runner.SHUTTING_DOWN.set
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_job(rt, job_id)
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "running" and job.error_code is None
+
+
+def test_an_error_caused_by_the_interrupt_is_the_interrupt(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(runner, "SHUTTING_DOWN", threading.Event())
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as interrupt:
+            raise RuntimeError("wrapped") from interrupt
+    except RuntimeError as wrapped:
+        error = wrapped
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(error))
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_job(rt, job_id)
+    job = rt.store.get(job_id)
+    assert job is not None and job.status == "running"
+
+
+def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(queue, "SHUTTING_DOWN", threading.Event())
+    seen: list[bool] = []
+
+    def hueys(signum: int, frame: object) -> None:  # stands in for huey's: raises in the task
+        seen.append(queue.SHUTTING_DOWN.is_set())
+
+    original = signal.signal(signal.SIGTERM, hueys)
+    try:
+        queue._note_shutdown_signal()
+        queue._note_shutdown_signal()  # once per task: wrapped once only
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)
+    finally:
+        signal.signal(signal.SIGTERM, original)
+    assert seen == [True]

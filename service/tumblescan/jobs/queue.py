@@ -5,13 +5,16 @@ longer queued does nothing, and enqueuing a job twice is harmless."""
 from __future__ import annotations
 
 import logging
+import signal
+import threading
+from types import FrameType
 from typing import Any
 
 from huey import Huey, RedisHuey, SqliteHuey
 from huey.signals import SIGNAL_INTERRUPTED
 
 from ..settings import Settings
-from .runner import run_job
+from .runner import SHUTTING_DOWN, run_job
 from .runtime import get_runtime
 
 log = logging.getLogger("tumblescan.queue")
@@ -28,6 +31,7 @@ def make_huey(settings: Settings) -> tuple[Huey, Any]:
 
     @huey.task(name=TASK_NAME)
     def execute(job_id: str) -> None:
+        _note_shutdown_signal()
         run_job(get_runtime(settings), job_id)
 
     @huey.signal(SIGNAL_INTERRUPTED)
@@ -39,3 +43,22 @@ def make_huey(settings: Settings) -> tuple[Huey, Any]:
             log.info("job %s interrupted by shutdown and re-queued", job_id)
 
     return huey, execute
+
+
+def _note_shutdown_signal() -> None:
+    """In a huey worker process, have the consumer's interrupt (SIGTERM, whose handler huey set
+    to raise KeyboardInterrupt in the running task) set :data:`.runner.SHUTTING_DOWN` first, so
+    that a job whose libraries turn the interrupt into another error still goes back to the
+    queue. Elsewhere (no handler of huey's, or not the main thread) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    previous = signal.getsignal(signal.SIGTERM)
+    if not callable(previous) or getattr(previous, "notes_shutdown", False):
+        return
+
+    def noted(signum: int, frame: FrameType | None) -> None:
+        SHUTTING_DOWN.set()
+        previous(signum, frame)
+
+    noted.notes_shutdown = True  # type: ignore[attr-defined]
+    signal.signal(signal.SIGTERM, noted)

@@ -33,6 +33,25 @@ STORE_PATIENCE_S = 120.0
 
 T = TypeVar("T")
 
+# Set in a worker process when the consumer interrupts it to shut down (jobs.queue notes the
+# signal). Huey stops the running job by raising KeyboardInterrupt in it, and a library may turn
+# that into an error of its own: pydantic-core, interrupted while building a model's schema,
+# raised SchemaError, and the job failed instead of going back to the queue.
+SHUTTING_DOWN = threading.Event()
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` came of the shutdown interrupt: a KeyboardInterrupt in its chain of causes,
+    or raised after :data:`SHUTTING_DOWN` was set."""
+    seen: BaseException | None = exc
+    for _ in range(32):  # a chain of causes may loop
+        if seen is None:
+            break
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return SHUTTING_DOWN.is_set()
+
 
 def _patiently(write: Callable[[], T], what: str) -> T:
     """``write()``, retried with backoff while the store is unreachable (a restart, a failover)."""
@@ -123,10 +142,13 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
         # runs the job again once the store is back, instead of the job ending as our fault.
         log.exception("job %s left to the reaper: the store is unreachable", job_id)
         return None
-    except OSError as exc:
-        log.exception("job %s failed on storage", job_id)
-        return _failed(rt, job_id, attempt, "storage_error", f"{type(exc).__name__}: {exc}")
     except Exception as exc:
+        if _interrupted(exc):
+            # Out as the interrupt it was: huey's signal puts the job back in the queue.
+            raise KeyboardInterrupt from exc
+        if isinstance(exc, OSError):
+            log.exception("job %s failed on storage", job_id)
+            return _failed(rt, job_id, attempt, "storage_error", f"{type(exc).__name__}: {exc}")
         log.exception("job %s failed", job_id)
         return _failed(rt, job_id, attempt, "internal_error", f"{type(exc).__name__}: {exc}")
     finally:
