@@ -136,8 +136,8 @@ def steps(
         mt, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
         e = lin.r / np.sqrt(lin.var)
         w = cauchyweights(e, 1.0) / lin.var
-        Ainv = np.linalg.inv(lin.J.T @ (lin.J * (cauchy_curvature(e, CAUCHY_C) / lin.var)[:, None]))
-        totals.append(Ainv @ (lin.J.T @ (w * lin.r)))
+        Hinv = np.linalg.inv(lin.J.T @ (lin.J * (cauchy_curvature(e, CAUCHY_C) / lin.var)[:, None]))
+        totals.append(Hinv @ (lin.J.T @ (w * lin.r)))
         anchor_T = mapping.apply(surf.anchor_obs[mt.src], surf.line[mt.src])
         cube = data.extent_m / 10
         cluster = patches(anchor_T, cube)
@@ -146,7 +146,7 @@ def steps(
             m = cluster == k
             centre = anchor_T[m].mean(axis=0)
             key = tuple(int(v) for v in np.floor(centre / cube))
-            found[key] = (Ainv @ (lin.J[m].T @ (w[m] * lin.r[m])), int(m.sum()), float(e[m].mean()), centre)
+            found[key] = (Hinv @ (lin.J[m].T @ (w[m] * lin.r[m])), int(m.sum()), float(e[m].mean()), centre)
         per_patch.append(found)
     return np.array(totals), per_patch, mapping.x, bound
 
