@@ -222,7 +222,9 @@ def test_an_error_caused_by_the_interrupt_is_the_interrupt(tmp_path: Path, monke
     assert job is not None and job.status == "running"
 
 
-def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(queue, "SHUTTING_DOWN", threading.Event())
     seen: list[bool] = []
 
@@ -231,8 +233,11 @@ def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(monkeypa
 
     original = signal.signal(signal.SIGTERM, hueys)
     try:
-        queue._note_shutdown_signal()
-        queue._note_shutdown_signal()  # once per task: wrapped once only
+        huey, _ = queue.make_huey(Settings(data_dir=tmp_path))
+        for startup_hook in huey._startup.values():  # what each worker process runs as it starts
+            startup_hook()
+        assert signal.getsignal(signal.SIGTERM) is not hueys  # wrapped by make_huey's startup hook
+        queue._note_shutdown_signal()  # a second call wraps nothing more
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(0.05)
     finally:

@@ -31,8 +31,10 @@ def make_huey(settings: Settings) -> tuple[Huey, Any]:
 
     @huey.task(name=TASK_NAME)
     def execute(job_id: str) -> None:
-        _note_shutdown_signal()
         run_job(get_runtime(settings), job_id)
+
+    # Once per worker process, after huey has set its interrupt handler there.
+    huey.on_startup()(_note_shutdown_signal)
 
     @huey.signal(SIGNAL_INTERRUPTED)
     def interrupted(signal: str, task: Any, *args: Any, **kwargs: Any) -> None:
