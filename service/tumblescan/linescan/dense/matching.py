@@ -4,10 +4,10 @@ For a source surfel ``a_s`` of one frame and the nearest planar surfel ``a_t`` o
 (within a gate, facing the same way), the residual is
 
     r = n(x) . (a_s(x) - a_t(x)),    n = mean of the two normals (symmetric objective),
-    var r = v_s / N_s + v_t / N_t + d^2 (v_ns + v_nt) / 4 + tau_s^2 + tau_t^2
+    var r = v_s / N_s + v_t / N_t + d^2 (v_ns + v_nt) / 4
 
-before the common scale ``s`` (see :mod:`.refine`), with ``tau^2`` each surfel's misfit once
-measured (:mod:`.misfit`), and the fit's robust loss is Cauchy on ``r / sqrt(var r)``.
+before the common scale ``s`` (see :mod:`.refine`), and the fit's robust loss is Cauchy on
+``r / sqrt(var r)``.
 """
 
 from __future__ import annotations
@@ -102,8 +102,6 @@ def linearize(data: DenseData, mapping: LineMapping, surf: Surfels, m: Matches, 
         + surf.var_m2[m.dst] / surf.count[m.dst]
         + offset2 * (surf.normal_var_rad2[m.src] + surf.normal_var_rad2[m.dst]) / 4
     )
-    if surf.misfit is not None:
-        var = var + surf.misfit[m.src] + surf.misfit[m.dst]
     return Linearized(np.asarray(r), J, np.asarray(var))
 
 

@@ -24,9 +24,7 @@ member's line (:mod:`.beams`); their rows follow the surfels' in the cost and th
 
 Three stages: every surfel matched in a neighbouring frame (right correspondences even from
 the initializer's rough start), then in random frames (the long time baselines fix the
-rates), then in every other frame from the converged start (each brings its own noise). At
-the last stage's start each surfel's misfit is measured from its residuals in all those
-frames and added to their variances (:mod:`.misfit`).
+rates), then in every other frame from the converged start (each brings its own noise).
 
 Covariance: a sandwich with the Cauchy cost's Hessian, clustered by patch of the target at
 ``T`` (cubes of extent / 10: residuals of one patch, from every frame, share pooled normals
@@ -36,7 +34,7 @@ and the surface model's misfit), by the cluster jackknife (see :mod:`.covariance
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -63,7 +61,6 @@ from .matching import (
     robust_sigma,
     weights,
 )
-from .misfit import surfel_misfit
 from .step_coords import StepCoords
 from .surfels import Surfels, build_surfels
 
@@ -210,15 +207,11 @@ def refine_dense(
     # Thin members join from the second stage on: at T their strips line up only once the
     # frames roughly agree.
     with_beams = [False, cfg.beams, cfg.beams]
-    # Each surfel's misfit is measured in the last stage alone: from a converged start, over
-    # its residuals in every other frame.
-    with_misfit = [False, False, True]
     if converged:
-        stages, gate = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
-        with_beams, with_misfit = with_beams[2:], with_misfit[2:]
+        stages, gate, with_beams = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m), with_beams[2:]
     total = sum(iterations for _, iterations in stages)
     terms: _Terms | None = None
-    for ((src, partner), iterations), beams_on, measure in zip(stages, with_beams, with_misfit, strict=True):
+    for ((src, partner), iterations), beams_on in zip(stages, with_beams, strict=True):
         z, terms, gate, step = _iterate(
             problem,
             z,
@@ -228,7 +221,6 @@ def refine_dense(
             gate,
             iterations,
             beams_on,
-            measure_misfit=measure,
             step=step,
             total=total,
             on_iteration=on_iteration,
@@ -247,15 +239,12 @@ def _iterate(
     iterations: int,
     beams_on: bool,
     *,
-    measure_misfit: bool = False,
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
 ) -> tuple[FloatArray, _Terms, float, int]:
     """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
-    distance to a matched surfel's centroid, tightened as the frames come together.
-    measure_misfit: measure each surfel's misfit at the start (:mod:`.misfit`) and keep it,
-    by cell, through any rebuild of the surfels in the stage."""
+    distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
     floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
     probe = _probe(data)
@@ -267,14 +256,10 @@ def _iterate(
     if terms is None or _shift(data, probe, terms.surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
         surf = build_surfels(data, mapping, noise)
     else:
-        surf = replace(terms.surf, misfit=None)
+        surf = terms.surf
     # A stage's start is a new motion: the members (their hits and variances) are found anew.
     beams = found_beams(surf, mapping)
     terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
-    misfit = None
-    if measure_misfit:
-        misfit = surfel_misfit(surf, terms.matches, terms.linearize(problem, mapping))
-        terms = replace(terms, surf=replace(surf, misfit=misfit))
     matched_at, matched_gate = mapping, gate
     lam = LM_START
     vectors = StepCoords(problem.free)
@@ -310,7 +295,7 @@ def _iterate(
         gate = max(floor, min(gate, 4 * CAUCHY_C * robust_sigma(lin.r[: len(terms.matches.src)])))
         surf, beams = terms.surf, terms.beams
         if _shift(data, probe, surf.mapping, mapping) > SURFEL_REFRESH * data.surfel_m:
-            surf = replace(build_surfels(data, mapping, noise), misfit=misfit)
+            surf = build_surfels(data, mapping, noise)
             beams = found_beams(surf, mapping)
         if (
             surf.mapping is mapping

@@ -134,9 +134,6 @@ class Surfels:
     # Each point's surfel ``(n,)``: its cell, or the neighbour on whose face it lies when its
     # own cell straddles an edge (:func:`~.faces.assign_to_faces`).
     point_cell: IntArray
-    # Each surfel's misfit ``(m,)``, a variance beyond the model's added to every residual it
-    # takes part in (:mod:`.misfit`; model units); None until measured.
-    misfit: FloatArray | None = None
 
 
 def _cell_moments(
