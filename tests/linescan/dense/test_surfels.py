@@ -6,11 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tumblescan.geometry.rotations import angles_from_axis
 from tumblescan.linescan.dense import surfels as surfels_module
 from tumblescan.linescan.dense.data import SPURIOUS_MIN_SHARE, DenseData, prepare
 from tumblescan.linescan.dense.estimate import SURFEL_FRACTION, surfel_size_m
-from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS, SIDE_NEIGHBOURS
+from tumblescan.linescan.dense.faces import BESIDE_MAX_SIGMAS
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.surfels import Surfels, build_surfels
 from tumblescan.linescan.sensor import SensorNoise
@@ -329,125 +328,3 @@ def test_a_face_seen_head_on_is_planar_at_the_estimators_cell_size() -> None:
         surf = build_surfels(data, LineMapping(x, data.tau_s, tuple(range(9))), NOISE)
         share[label] = float(np.mean(surf.planar[surf.point_cell]))
     assert share["extent / 100"] < 0.3 < 0.75 < share["estimator"], share
-
-
-def _grazing_wall_frames(
-    seed: int,
-    *,
-    radius_m: float | None = None,
-    rate_deg_s: float = 20.0,
-    plate: bool = False,
-    incidence_deg: float = 79.0,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Four frames of a wall at 79 deg incidence (``incidence_deg``) through (0, 0, 50) m (76-82 deg across the view:
-    cells of one face 1.2-2.1 m apart in range, beyond the range step), flat or bent about a
-    vertical axis to ``radius_m`` (convex towards the sensor). The wall turns at ``rate_deg_s``
-    about an axis that leaves it in place (its normal, or its own axis), so that at ``T`` the
-    frames' cells lie apart on it, as a turning target's do. With ``plate``, a plate facing the
-    sensor at 30 m stands in front of the wall's left part in every frame. Points, line times,
-    frames, whether each point is on the plate, the wall's normal at (0, 0, 50) m and the motion."""
-    n = np.array([np.sin(np.radians(incidence_deg)), 0.0, -np.cos(np.radians(incidence_deg))])
-    p0 = np.array([0.0, 0.0, 50.0])
-    az, el = np.meshgrid(np.radians(np.linspace(-3, 3, 300)), np.radians(np.linspace(-3, 3, 300)), indexing="ij")
-    d = np.stack([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)], axis=-1).reshape(-1, 3)
-    if radius_m is None:
-        hit, t = np.ones(len(d), dtype=bool), (p0 @ n) / (d @ n)
-        axis, centre = n, p0
-    else:
-        c = p0 - radius_m * n
-        a, b = d[:, 0] ** 2 + d[:, 2] ** 2, -2 * (d[:, 0] * c[0] + d[:, 2] * c[2])
-        disc = b**2 - 4 * a * (c[0] ** 2 + c[2] ** 2 - radius_m**2)
-        hit = disc > 0
-        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2 * a)
-        axis, centre = np.array([0.0, 1.0, 0.0]), c
-    clean = d * t[:, None]
-    on_plate = plate & (np.arctan2(d[:, 0], d[:, 2]) < np.radians(-1.0))
-    clean[on_plate] = d[on_plate] * (30.0 / d[on_plate, 2:3])
-    xyz, tau, frame, plates = [], [], [], []
-    for k in range(4):
-        xyz.append(NOISE.sample(clean[hit], np.random.default_rng(seed + k)))
-        tau.append(k + np.repeat(np.arange(300) * 1e-3, 300)[hit])
-        frame.append(np.full(np.count_nonzero(hit), k))
-        plates.append(on_plate[hit])
-    alpha, beta = angles_from_axis(axis)
-    x = np.array([alpha, beta, np.radians(rate_deg_s), 1.0, 0.5, 0.0, *centre])
-    return np.concatenate(xyz), np.concatenate(tau), np.concatenate(frame), np.concatenate(plates), n, x
-
-
-def test_a_wall_at_grazing_incidence_is_used_and_an_occlusion_border_is_not(monkeypatch: pytest.MonkeyPatch) -> None:
-    xyz, tau, frame, plate, n_true, x = _grazing_wall_frames(seed=6, plate=True)
-    data = prepare(xyz, tau, frame, surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m)
-    mapping = LineMapping(x, data.tau_s, tuple(range(9)))
-    m = len(data.cell_frame)
-    on_plate = np.bincount(data.cell, plate, minlength=m) > 0
-    on_wall = np.bincount(data.cell, ~plate, minlength=m) > 0
-    nb = data.neighbours
-    beside_plate = np.any((nb >= 0) & on_plate[np.maximum(nb, 0)], axis=1)
-    side = nb[:, list(SIDE_NEIGHBOURS)]
-    side_plate = np.any((side >= 0) & on_plate[np.maximum(side, 0)], axis=1)
-    side_wall = np.any((side >= 0) & on_wall[np.maximum(side, 0)], axis=1)
-    wall_inside = on_wall & ~on_plate & ~beside_plate & np.all(nb >= 0, axis=1)
-    with_rule = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "GRAZING_CELLS", False)
-    without = build_surfels(data, mapping, NOISE)
-    # Without the rule the wall's cells, 1.2-2.1 m apart in range, pass for an occlusion border.
-    inside = np.count_nonzero(wall_inside)
-    assert np.count_nonzero(without.planar & wall_inside) < 0.1 * inside
-    assert np.count_nonzero(with_rule.planar & wall_inside) > 0.9 * inside
-    # No cell holding points of both surfaces is used, and the rule adds none beside the other
-    # surface in the view (a plate cell beside a cell mostly of plate points passes the range step).
-    border = (on_wall & side_plate) | (on_plate & side_wall)
-    assert np.count_nonzero(border) >= 30
-    assert not np.any(with_rule.planar & on_wall & on_plate)
-    assert not np.any(with_rule.planar & ~without.planar & border)
-    # The grazing cells' anchors lie on the wall: within a millimetre, and no bias.
-    added = with_rule.planar & ~without.planar
-    offset = (with_rule.anchor_obs[added] - np.array([0.0, 0.0, 50.0])) @ n_true
-    assert np.sqrt(np.mean(offset**2)) < 1e-3
-    assert abs(float(np.mean(offset))) < 3 * np.std(offset) / np.sqrt(len(offset))
-
-
-def test_grazing_cells_of_a_curved_wall_are_left_out(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Bent to a radius of 100 m, the wall's grazing cells (30 cm across, 1.5 m along the sight)
-    # have their centroids about a millimetre inside it, which the curvature fitted around them
-    # at T does not always correct (their neighbours lie in a row): the rule takes none of them.
-    # Allowed any depth, it would take three hundred, their anchors 0.6-1.1 mm inside the wall.
-    xyz, tau, frame, _, _, x = _grazing_wall_frames(seed=6, radius_m=100.0, rate_deg_s=2.0)
-    data = prepare(xyz, tau, frame, surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m)
-    mapping = LineMapping(x, data.tau_s, tuple(range(9)))
-    with_rule = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "GRAZING_MAX_DEPTH_M", np.inf)
-    any_shift = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "GRAZING_CELLS", False)
-    without = build_surfels(data, mapping, NOISE)
-    added = any_shift.planar & ~without.planar
-    assert np.count_nonzero(added) > 100
-    centre = x[6:9]
-    depth = np.hypot(any_shift.anchor_obs[added, 0] - centre[0], any_shift.anchor_obs[added, 2] - centre[2]) - 100.0
-    assert np.mean(depth) < -3e-4
-    assert np.array_equal(with_rule.planar, without.planar)
-
-
-def test_grazing_cells_seen_beyond_the_limit_are_left_out(monkeypatch: pytest.MonkeyPatch) -> None:
-    # A wall at 86.5 deg (83.5-89.5 across the view): a cell's footprint along the sight, 10-100
-    # cell widths, reaches past the neighbours that vouch for it (over an edge, on a real target).
-    # Only the cells seen within GRAZING_MAX_INCIDENCE are taken; without the limit, more.
-    xyz, tau, frame, _, _, x = _grazing_wall_frames(seed=6, incidence_deg=86.5)
-    data = prepare(xyz, tau, frame, surfel_m=0.3, range_sigma_m=NOISE.range_sigma_m)
-    mapping = LineMapping(x, data.tau_s, tuple(range(9)))
-    with_limit = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "GRAZING_MAX_INCIDENCE", np.radians(90.0))
-    no_limit = build_surfels(data, mapping, NOISE)
-    monkeypatch.setattr(surfels_module, "GRAZING_CELLS", False)
-    without = build_surfels(data, mapping, NOISE)
-
-    def incidence_deg(s: surfels_module.Surfels, cells: np.ndarray) -> np.ndarray:
-        sight = s.anchor_obs[cells] / np.linalg.norm(s.anchor_obs[cells], axis=1, keepdims=True)
-        return np.degrees(np.arccos(np.abs(np.einsum("ni,ni->n", sight, s.normal_obs[cells]))))
-
-    added = np.flatnonzero(with_limit.planar & ~without.planar)
-    beyond = np.flatnonzero(no_limit.planar & ~without.planar)
-    assert len(added) > 0 and len(beyond) > len(added) + 50, (len(added), len(beyond))
-    # The limit is judged on each cell's own noisy normal; the pooled normal differs by a little.
-    assert np.all(incidence_deg(with_limit, added) < 84.5)
-    assert np.any(incidence_deg(no_limit, beyond) > 85.0)

@@ -212,55 +212,6 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     return np.asarray(cells & ~near)
 
 
-def grazing_interior(
-    planes: CellPlanes, candidate: NDArray[np.bool_], scatter_m2: FloatArray, *, max_depth_m: float
-) -> NDArray[np.bool_]:
-    """The ``candidate`` cells (flat, yet not interior in the view) whose 4 side neighbours were
-    hit and lie on their plane, however far in range, on a surface flat enough:
-
-        |n . (c_j - c)| <= BESIDE_MAX_SIGMAS sqrt(v / N + v / N_j + t |c_j - c|_perp^2)
-
-    for each side neighbour ``j`` (``n``, ``v``, ``t``, ``N``: the cell's normal, a point's noise
-    along it, the normal's tilt variance and its point count; ``c``, ``c_j`` the centroids at
-    ``T``), and the depth of the cell's centroid below the surface, ``sum_k kappa_k S_k / 2`` over
-    the two opposite pairs of side neighbours, at most ``max_depth_m``: ``kappa_k = 2 (z_a + z_b) /
-    (|d_a|_perp^2 + |d_b|_perp^2)`` the curvature between the pair (``z = n . d``, ``d = c_j - c``:
-    the tilt of the cell's own normal cancels in the sum) and ``S_k`` the cell's spread
-    ``scatter_m2`` (``(m, 3, 3)``) along the pair.
-
-    At grazing incidence ``theta`` neighbouring cells of one face lie a cell's width times
-    ``tan(theta)`` apart in range, beyond ``data.MAX_RANGE_STEP`` from about 76 deg, and the
-    view's interior test takes them for an occlusion border; the surface behind a real border
-    does not lie on the cell's plane. These cells sit at the far edges of the faces, where the
-    lever arm is longest and the noise along the normal is the angle noise, not the range noise.
-    Their footprint is long along the sight, and a curvature's depth over it with it; the
-    curvature fitted to the surfels around at ``T`` (:func:`.curvature.foot_offset`) is often
-    unknown there (the cells around lie in a row), so the cell's own neighbours tell it."""
-    neighbours, mean, normal_ref = planes.neighbours, planes.mean_m, planes.normal_ref
-    var, tilt, count = planes.var_m2, planes.tilt_var_rad2, planes.count
-    side = neighbours[:, list(SIDE_NEIGHBOURS)]
-    ok = candidate & np.all(side >= 0, axis=1)
-    z, d_perp = {}, {}
-    for k in SIDE_NEIGHBOURS:
-        j = np.maximum(neighbours[:, k], 0)
-        d = mean[j] - mean
-        z[k] = np.einsum("ni,ni->n", normal_ref, d)
-        d_perp[k] = d - z[k][:, None] * normal_ref
-        perp2 = np.einsum("ni,ni->n", d_perp[k], d_perp[k])
-        sigma2 = var / np.maximum(count, 1) + var / np.maximum(count[j], 1) + tilt * perp2
-        ok &= z[k] ** 2 <= BESIDE_MAX_SIGMAS**2 * sigma2
-    depth = np.zeros(len(neighbours))
-    for a, b in OPPOSITE_PAIRS:
-        if a not in z or b not in z:
-            continue
-        span2 = np.einsum("ni,ni->n", d_perp[a], d_perp[a]) + np.einsum("ni,ni->n", d_perp[b], d_perp[b])
-        kappa = 2 * (z[a] + z[b]) / np.maximum(span2, 1e-300)
-        u = d_perp[a] - d_perp[b]
-        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
-        depth += kappa * np.einsum("ni,nij,nj->n", u, scatter_m2, u) / 2
-    return np.asarray(ok & (np.abs(depth) <= max_depth_m))
-
-
 def clear_of_outlines(
     neighbours: IntArray, count: FloatArray, interior: NDArray[np.bool_], cells: NDArray[np.bool_]
 ) -> NDArray[np.bool_]:

@@ -26,7 +26,6 @@ from .faces import (
     clear_of_other_faces,
     clear_of_outlines,
     flat_cells,
-    grazing_interior,
     inside_face,
 )
 from .mapping import LineMapping
@@ -41,16 +40,6 @@ SHARED_MAX_ANGLE = np.radians(30.0)
 # The points of the cells left out beside an outline are not handed to other cells (build_surfels).
 KEEP_EDGE_POINTS_OUT = True
 CURVATURE_CORRECTION = True  # anchors on the surface, not at the centroids (curvature.py)
-# Cells at grazing incidence on the plane of their neighbours count as interior where the
-# surface is flat: a curvature that puts the centroid at most this far (m) off it (faces.
-# grazing_interior). A grazing cell's footprint is long along the sight, and that depth with it.
-GRAZING_CELLS = True
-GRAZING_MAX_DEPTH_M = 3e-4
-# ... and seen at most this far from head-on. Beyond, a cell's footprint along the sight (its
-# width times tan(incidence), 9.5 widths at 84 deg) reaches past the neighbours that vouch for
-# it, over an edge: of the cells these rules added on nine bench cases at the truth, the nine
-# beyond 84 deg lay 8.9 sigmas off the true surface (RMS; one 28 mm), the 129 within it 0.97.
-GRAZING_MAX_INCIDENCE = np.radians(84.0)
 
 
 def normal_variance(noise: SensorNoise, xyz_obs: FloatArray, n_obs: FloatArray) -> FloatArray:
@@ -218,25 +207,18 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     flat = flat_cells(w, var, count)
     spread = count * np.maximum(w[:, 1], 0.0)
     tilt_var = _tilt_variance(var, spread)
+    planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
     planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
-    grazing = np.zeros(m, dtype=bool)
-    if GRAZING_CELLS:
-        sight = anchor_obs / np.linalg.norm(anchor_obs, axis=1, keepdims=True)
-        seen_within = np.abs(np.einsum("ni,ni->n", sight, normal_obs)) >= np.cos(GRAZING_MAX_INCIDENCE)
-        candidate = flat & ~data.interior & seen_within
-        grazing = grazing_interior(planes, candidate, cov - noise_ref, max_depth_m=GRAZING_MAX_DEPTH_M)
-    interior = data.interior | grazing
-    planar = flat & interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, interior)
-    planar |= beside_face(planes, flat & interior & ~planar, planar)
+    planar |= beside_face(planes, flat & data.interior & ~planar, planar)
     # The cells that may hold a few points of another face, within the noise of their plane.
     planar = clear_of_other_faces(planes, planar, planar)
-    outline = planar & ~clear_of_outlines(data.neighbours, count, interior, planar)
+    outline = planar & ~clear_of_outlines(data.neighbours, count, data.interior, planar)
     planar &= ~outline
     # Nor are the points of the cells beside an outline handed over (unless KEEP_EDGE_POINTS_OUT
     # is off): the other face's among them lie on this face's plane too, and no neighbour's plane
     # tells them apart, so they joined the neighbours' surfels instead. The band along an edge
     # between two faces' planes is assign_to_faces' own to keep out.
-    givers = interior & ~planar & ~(outline & KEEP_EDGE_POINTS_OUT)
+    givers = data.interior & ~planar & ~(outline & KEEP_EDGE_POINTS_OUT)
     # One cell's normal is tilted by degrees of noise, and an eigenvector's error has a bias of
     # the order of its variance: take it from every frame's planar cells nearby instead (with
     # the cells across edges left out above, these all lie on one face). These are the planes
