@@ -43,13 +43,13 @@ SHUTTING_DOWN = threading.Event()
 def _interrupted(exc: BaseException) -> bool:
     """Whether ``exc`` came of the shutdown interrupt: a KeyboardInterrupt in its chain of causes,
     or raised after :data:`SHUTTING_DOWN` was set."""
-    seen: BaseException | None = exc
-    for _ in range(32):  # a chain of causes may loop
-        if seen is None:
-            break
-        if isinstance(seen, KeyboardInterrupt):
+    visited: set[int] = set()  # a chain of causes set by hand may loop
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in visited:
+        if isinstance(cause, KeyboardInterrupt):
             return True
-        seen = seen.__cause__ or seen.__context__
+        visited.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
     return SHUTTING_DOWN.is_set()
 
 
