@@ -2,6 +2,7 @@
 
     python -m bench.linescan.patch_potential [--shapes box long-array] [--distances 50 100]
                                              [--seeds 0 1 2 3 4] [--voxel 6] [--iterations 4]
+                                             [--size 512] [--stem patch_potential]
 
 The dense fit matches surfel centroids (:mod:`~tumblescan.linescan.dense.matching`); point-to-plane
 registration against a map (CT-ICP, KISS-ICP) and plane factors (BALM) take every point instead,
@@ -48,7 +49,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -168,33 +168,37 @@ def cut_patches(xyz_T: FloatArray, cell_normal_T: FloatArray, planar: BoolArray,
     return Patches(patch, centre, normal, e1, e2)
 
 
+@dataclass(frozen=True)
+class Hits:
+    """The used hits at one motion: heights ``w`` ``(n,)`` along their patches' normals and
+    in-plane offsets ``uv`` ``(n, 2)`` (m), their patches ``k``, variances along the normal
+    ``var`` (m^2), and the noise's moments for the corrected plane fit (or None)."""
+
+    w: FloatArray
+    uv: FloatArray
+    k: IntArray
+    var: FloatArray
+    moments: tuple[FloatArray, FloatArray] | None
+
+
 class PatchFit:
-    """The patches' Cauchy cost at a motion, its planes profiled out, and Gauss-Newton steps."""
+    """The patches' Cauchy cost at a motion with its planes fitted, and steps of its estimating
+    equation (the Gauss-Newton step of the profiled cost when not ``corrected``)."""
 
     def __init__(self, data: DenseData, noise: SensorNoise, patches: Patches, *, corrected: bool) -> None:
         self.data, self.noise, self.patches, self.corrected = data, noise, patches, corrected
-
-    def _local(self, mapping: LineMapping, idx: IntArray) -> tuple[FloatArray, FloatArray, IntArray]:
-        """Heights ``(n,)`` and in-plane offsets ``(n, 2)`` of the hits ``idx`` at ``mapping``."""
-        pt = self.patches
-        k = pt.patch[idx]
-        d = mapping.apply(self.data.xyz_m[idx], self.data.line[idx]) - pt.centre[k]
-        uv = np.column_stack([np.einsum("ni,ni->n", d, pt.e1[k]), np.einsum("ni,ni->n", d, pt.e2[k])])
-        return np.einsum("ni,ni->n", d, pt.normal[k]), uv, k
 
     def _obs(self, mapping: LineMapping, idx: IntArray, v_T: FloatArray) -> FloatArray:
         """``v_T`` ``(n, 3)`` at ``T`` in each hit's sensor frame (``R v = (R^T)^T v``)."""
         return np.einsum("nij,ni->nj", mapping.Rt[self.data.line[idx]], v_T)
 
-    def residuals(
-        self, mapping: LineMapping, idx: IntArray, weight: FloatArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray]:
-        """Residuals and variances of the hits ``idx`` (m, m^2) after their planes' fit with the
-        extra weights ``weight``; the planes, their normal matrices, the hits' patches."""
+    def hits(self, mapping: LineMapping, idx: IntArray) -> Hits:
+        """The hits ``idx`` at ``mapping``: everything their planes' fits and steps share."""
         pt, xyz = self.patches, self.data.xyz_m[idx]
-        w, uv, k = self._local(mapping, idx)
+        k = pt.patch[idx]
+        d = mapping.apply(xyz, self.data.line[idx]) - pt.centre[k]
+        uv = np.column_stack([np.einsum("ni,ni->n", d, pt.e1[k]), np.einsum("ni,ni->n", d, pt.e2[k])])
         n_obs = self._obs(mapping, idx, pt.normal[k])
-        var = normal_variance(self.noise, xyz, n_obs)
         moments = None
         if self.corrected:
             e1, e2 = self._obs(mapping, idx, pt.e1[k]), self._obs(mapping, idx, pt.e2[k])
@@ -206,29 +210,40 @@ class PatchFit:
                 [noise_product(self.noise, xyz, e1, n_obs), noise_product(self.noise, xyz, e2, n_obs)]
             )
             moments = (cov_uv, cov_uv_w)
-        plane, normal_matrix = plane_fit(w, uv, weight / var, k, len(pt.centre), moments)
-        r = w - plane[k, 0] - plane[k, 1] * uv[:, 0] - plane[k, 2] * uv[:, 1]
-        return r, var, plane, normal_matrix, k
+        w = np.einsum("ni,ni->n", d, pt.normal[k])
+        return Hits(w, uv, k, normal_variance(self.noise, xyz, n_obs), moments)
+
+    def planes(self, hits: Hits, weight: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The planes fitted with the extra weights ``weight`` ``(n,)``: the hits' residuals (m),
+        the planes ``(K, 3)`` and their normal matrices ``(K, 3, 3)``."""
+        plane, normal_matrix = plane_fit(
+            hits.w, hits.uv, weight / hits.var, hits.k, len(self.patches.centre), hits.moments
+        )
+        k = hits.k
+        r = hits.w - plane[k, 0] - plane[k, 1] * hits.uv[:, 0] - plane[k, 2] * hits.uv[:, 1]
+        return r, plane, normal_matrix
 
     def step(self, x: FloatArray) -> tuple[FloatArray, FloatArray, float]:
-        """One Gauss-Newton step of the profiled Cauchy cost from ``x`` ``(9,)``: the step, the
-        Gauss-Newton matrix ``(9, 9)`` (its inverse times ``s^2`` is the design's covariance)
-        and the residuals' robust scale ``s``."""
+        """One step from ``x`` ``(9,)``: the step, the reweighted Gauss-Newton matrix ``(9, 9)``
+        of the profiled cost (its inverse times ``s^2`` is the design's covariance, about 4 %
+        above the Cauchy optimum's) and the residuals' robust scale ``s``."""
         data, pt = self.data, self.patches
         mapping = LineMapping(x, data.tau_s, tuple(range(9)))
         idx = np.flatnonzero(pt.used)
+        hits = self.hits(mapping, idx)
         cauchy = np.ones(len(idx))
         for _ in range(PLANE_PASSES):
-            r, var, _, _, _ = self.residuals(mapping, idx, cauchy)
-            e = r / np.sqrt(var)
+            r, _, _ = self.planes(hits, cauchy)
+            e = r / np.sqrt(hits.var)
             scale = max(robust_sigma(e), 1e-12)
             cauchy = 1.0 / (1.0 + (e / (CAUCHY_C * scale)) ** 2)
-        r, var, plane, normal_matrix, k = self.residuals(mapping, idx, cauchy)
+        r, plane, normal_matrix = self.planes(hits, cauchy)
+        k = hits.k
         # The plane's slope turns the normal each hit's motion is measured along.
         g = pt.normal[k] - plane[k, 1:2] * pt.e1[k] - plane[k, 2:3] * pt.e2[k]
         J = mapping.normal_derivative(g, data.xyz_m[idx], data.line[idx])
-        weight = cauchy / var
-        a = np.column_stack([np.ones(len(idx)), self._local(mapping, idx)[1]])
+        weight = cauchy / hits.var
+        a = np.column_stack([np.ones(len(idx)), hits.uv])
         B = np.zeros((len(pt.centre), 3, J.shape[1]))
         for j in range(3):
             for c in range(J.shape[1]):
@@ -236,14 +251,17 @@ class PatchFit:
         H = (J * weight[:, None]).T @ J - np.einsum("kaj,kab,kbc->jc", B, np.linalg.inv(normal_matrix), B)
         grad = (J * weight[:, None]).T @ r
         if self.corrected:
-            grad -= 0.5 * ((weight * r * r / var)[:, None] * self._variance_gradient(mapping, idx, g)).sum(axis=0)
+            dv = self.variance_gradient(mapping, idx)
+            grad -= 0.5 * ((weight * r * r / hits.var)[:, None] * dv).sum(axis=0)
         return -np.linalg.solve(H, grad), H, scale
 
-    def _variance_gradient(self, mapping: LineMapping, idx: IntArray, g: FloatArray) -> FloatArray:
-        """``d var_i / dx`` ``(n, 9)``: ``var = n_obs^T Sigma n_obs`` with ``n_obs = R(tau; x) n``, so
+    def variance_gradient(self, mapping: LineMapping, idx: IntArray) -> FloatArray:
+        """``d var_i / dx`` ``(n, 9)`` of the hits ``idx``: ``var = n_obs^T Sigma n_obs`` with
+        ``n_obs = R(tau; x) n`` (``n`` the patch's normal, as in the residuals' variance), so
         ``d var = 2 n^T d(R^T) (Sigma n_obs)``; the centre does not turn the normal."""
-        unit = g / np.linalg.norm(g, axis=1)[:, None]
-        xyz, n_obs = self.data.xyz_m[idx], self._obs(mapping, idx, unit)
+        assert mapping.free == tuple(range(9))
+        n = self.patches.normal[self.patches.patch[idx]]
+        xyz, n_obs = self.data.xyz_m[idx], self._obs(mapping, idx, n)
         rho = np.linalg.norm(xyz, axis=1)
         s = xyz / rho[:, None]
         across = (self.noise.angle_sigma_rad * rho) ** 2
@@ -251,18 +269,21 @@ class PatchFit:
             across[:, None] * n_obs
             + ((self.noise.range_sigma_m**2 - across) * np.einsum("ni,ni->n", s, n_obs))[:, None] * s
         )
-        dv = 2.0 * mapping.normal_derivative(unit, sigma_n + mapping.center, self.data.line[idx])
+        # normal_derivative contracts n^T d(R^T) (v - centre); its centre columns are dropped.
+        dv = 2.0 * mapping.normal_derivative(n, sigma_n + mapping.center, self.data.line[idx])
         dv[:, 6:] = 0.0
         return dv
 
-    def optimum(self, x0: FloatArray, iterations: int) -> tuple[FloatArray, FloatArray, float]:
-        """The cost's optimum from ``x0`` after ``iterations`` steps, its Gauss-Newton matrix and scale."""
+    def optimum(self, x0: FloatArray, iterations: int) -> tuple[FloatArray, FloatArray, float, float]:
+        """Where ``iterations`` steps from ``x0`` end, the last step's matrix and scale, and the
+        last step's largest component over its sigma (how far from converged)."""
         x = x0.copy()
-        H, scale = np.eye(len(x0)), 1.0
+        H, scale, last = np.eye(len(x0)), 1.0, np.inf
         for _ in range(iterations):
             dx, H, scale = self.step(x)
             x = x + dx
-        return x, H, scale
+            last = float(np.max(np.abs(dx) / (scale * np.sqrt(np.diag(np.linalg.inv(H))))))
+        return x, H, scale, last
 
 
 def gate_hits(fit: PatchFit, mapping: LineMapping, cube_m: float) -> Patches:
@@ -271,7 +292,7 @@ def gate_hits(fit: PatchFit, mapping: LineMapping, cube_m: float) -> Patches:
     hits dropped."""
     pt, data = fit.patches, fit.data
     idx = np.flatnonzero(pt.used)
-    _, _, plane, _, _ = fit.residuals(mapping, idx, np.ones(len(idx)))
+    _, plane, _ = fit.planes(fit.hits(mapping, idx), np.ones(len(idx)))
     xyz_T = mapping.apply(data.xyz_m, data.line)
     origin = xyz_T.min(axis=0)
     cube_of = np.floor((xyz_T - origin) / cube_m).astype(np.int64)
@@ -363,32 +384,23 @@ def case(name: str, distance_m: float, seed: int, size: int, voxel: float, itera
     xyz_T = mapping.apply(data.xyz_m, data.line)
     cell_normal_T = np.einsum("nij,nj->ni", mapping.Rt[surf.line], surf.normal_obs)[surf.point_cell]
     planar = np.asarray(surf.planar[surf.point_cell])
-    planes = _drop_small(cut_patches(xyz_T, cell_normal_T, planar, voxel * data.surfel_m))
-    gated: Patches | None = None
-    designs: dict[str, Callable[[], tuple[Patches, bool]]] = {
-        "planar cells, raw": lambda: (planes, False),
-        "planar cells, corrected": lambda: (planes, True),
-        "all hits, corrected": lambda: (_gated(), True),
-        "all hits, true faces": lambda: (true_faces_only(_gated(), _faces()), True),
+    cube_m = voxel * data.surfel_m
+    planes = _drop_small(cut_patches(xyz_T, cell_normal_T, planar, cube_m))
+    every = gate_hits(PatchFit(data, noise, planes, corrected=True), mapping, cube_m)
+    face = face_of_hits(scene, motion, sim.reference_m)[0]
+    designs = {
+        "planar cells, raw": (planes, False),
+        "planar cells, corrected": (planes, True),
+        "all hits, corrected": (every, True),
+        "all hits, true faces": (true_faces_only(every, face if data.kept is None else face[data.kept]), True),
     }
-
-    def _gated() -> Patches:
-        nonlocal gated
-        if gated is None:
-            gated = gate_hits(PatchFit(data, noise, planes, corrected=True), mapping, voxel * data.surfel_m)
-        return gated
-
-    def _faces() -> IntArray:
-        face = face_of_hits(scene, motion, sim.reference_m)[0]
-        return face if data.kept is None else face[data.kept]
-
-    for label, make in designs.items():
-        patches, corrected = make()
-        x, H, scale = PatchFit(data, noise, patches, corrected=corrected).optimum(x0, iterations)
+    last: dict[str, float] = {}
+    for label, (patches, corrected) in designs.items():
+        x, H, scale, last[label] = PatchFit(data, noise, patches, corrected=corrected).optimum(x0, iterations)
         errors[label] = over_bound(np.outer(x - x0, x - x0))
         sigmas[label] = over_bound(np.asarray(np.linalg.inv(H), dtype=float) * scale**2)
         used[label] = float(np.mean(patches.used))
-    out.update(errors=errors, sigmas=sigmas, used=used)
+    out.update(errors=errors, sigmas=sigmas, used=used, last_step_over_sigma=last)
     return out
 
 
@@ -416,23 +428,33 @@ def main() -> None:
     rows = []
     summary: dict[str, dict[str, dict[str, float]]] = {}
     for name in args.shapes:
-        mine = [c for c in cases if c["shape"] == name]
         for label in DESIGNS:
-            err = float(np.sqrt(np.mean(np.square([c["errors"][label] for c in mine]))))  # type: ignore[index]
-            sig = (
-                float(np.sqrt(np.mean(np.square([c["sigmas"][label] for c in mine]))))  # type: ignore[index]
-                if label != "surfel pairs"
-                else float("nan")
+            mine = [c for c in cases if c["shape"] == name]
+            entry = {f"error_over_bound_{d:g}m": _rms(mine, "errors", label, d) for d in args.distances}
+            entry["error_over_bound"] = _rms(mine, "errors", label)
+            entry["sigma_over_bound"] = _rms(mine, "sigmas", label) if label != "surfel pairs" else float("nan")
+            entry["used"] = float(np.mean([c["used"][label] for c in mine]))  # type: ignore[index]
+            summary.setdefault(name, {})[label] = entry
+            sigma = "" if label == "surfel pairs" else f"{entry['sigma_over_bound']:.2f}"
+            errors = [f"{entry[f'error_over_bound_{d:g}m']:.2f}" for d in args.distances]
+            rows.append(
+                [name, label, *errors, f"{entry['error_over_bound']:.2f}", sigma, f"{100 * entry['used']:.1f} %"]
             )
-            share = float(np.mean([c["used"][label] for c in mine]))  # type: ignore[index]
-            summary.setdefault(name, {})[label] = {"error_over_bound": err, "sigma_over_bound": sig, "used": share}
-            rows.append([name, label, f"{err:.2f}", "" if np.isnan(sig) else f"{sig:.2f}", f"{100 * share:.1f} %"])
-    print("\nRMS over the cases and the four parameters, at each design's optimum from the truth:")
-    print(table(rows, ["shape", "design", "error / bound", "sigma / bound", "hits used"]))
+    converged = max(v for c in cases for v in c["last_step_over_sigma"].values())  # type: ignore[attr-defined]
+    print("\nRMS over the cases and the four parameters, where each design's steps from the truth end:")
+    header = ["shape", "design", *(f"error / bound, {d:g} m" for d in args.distances), "all", "sigma / bound"]
+    print(table(rows, [*header, "hits used"]))
+    print(f"the last step's largest component: {converged:.3f} of its sigma")
     out = out_dir()
     (out / f"{args.stem}.json").write_text(json.dumps({"summary": summary, "cases": cases}, indent=1))
     _plot(summary, out / f"{args.stem}.png")
     print(f"wrote {out / args.stem}.json and .png")
+
+
+def _rms(cases: list[dict[str, object]], key: str, label: str, distance: float | None = None) -> float:
+    """RMS over the cases (at ``distance``, or all) and the four parameters of ``case[key][label]``."""
+    values = [c[key][label] for c in cases if distance is None or c["distance_m"] == distance]  # type: ignore[index]
+    return float(np.sqrt(np.mean(np.square(values))))
 
 
 def _plot(summary: dict[str, dict[str, dict[str, float]]], path: Path) -> None:

@@ -1,16 +1,19 @@
-"""The bench's per-hit design against planes of the map: its corrected plane fit, and its optimum
-on noise-free frames."""
+"""The bench's per-hit design against planes of the map: its corrected plane fit, its optimum on
+noise-free frames, and the variance gradient its errors-in-variables correction rests on."""
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
-from bench.linescan.patch_potential import PatchFit, cut_patches, noise_product, plane_fit
+from bench.linescan.patch_potential import Patches, PatchFit, cut_patches, noise_product, plane_fit
 from bench.linescan.truth import dense_data
 
 from tumblescan import Scanner, Scene, simulate_frames
 from tumblescan.geometry.rotations import axis_from_angles
+from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.surfels import build_surfels
+from tumblescan.linescan.dense.surfels import build_surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 
 from ..conftest import motion_for
@@ -46,7 +49,9 @@ def test_the_corrected_plane_fit_takes_out_the_tilt_the_shared_noise_gives() -> 
     assert np.all(np.abs(fixed[0, 1:]) / slope_se < 3.0)
 
 
-def test_on_noise_free_frames_the_per_hit_optimum_is_the_truth() -> None:
+@cache
+def _box() -> tuple[DenseData, LineMapping, SensorNoise, Patches]:
+    """Noise-free frames of the box at 50 m, at the true motion, and their patches."""
     motion = motion_for(1, distance_m=50.0)
     scene = Scene(scanner=Scanner(lines=160, pixels=160), noise=False)
     sim = simulate_frames(motion, scene, seed=1)
@@ -57,15 +62,43 @@ def test_on_noise_free_frames_the_per_hit_optimum_is_the_truth() -> None:
     planar = np.asarray(surf.planar[surf.point_cell])
     normal_T = np.einsum("nij,nj->ni", mapping.Rt[surf.line], surf.normal_obs)[surf.point_cell]
     patches = cut_patches(mapping.apply(data.xyz_m, data.line), normal_T, planar, 6 * data.surfel_m)
+    return data, mapping, scene.scanner.noise, patches
+
+
+def test_on_noise_free_frames_the_per_hit_optimum_is_the_truth() -> None:
+    data, mapping, noise, patches = _box()
     assert np.mean(patches.used) > 0.5
     x0 = mapping.x
     # Started a little off the truth, the steps come back to it (the raw design: the corrections
     # take out noise moments that noise-free frames do not have).
     start = x0 + np.array([1e-3, -1e-3, 1e-4, 1e-3, 1e-3, -1e-4, 0.0, 0.0, 0.0])
-    x, _, _ = PatchFit(data, scene.scanner.noise, patches, corrected=False).optimum(start, 4)
+    x, _, _, _ = PatchFit(data, noise, patches, corrected=False).optimum(start, 4)
     axis_off = [
         np.degrees(np.arccos(np.clip(axis_from_angles(x[a], x[a + 1]) @ axis_from_angles(x0[a], x0[a + 1]), -1, 1)))
         for a in (0, 3)
     ]
     assert max(axis_off) < 1e-3  # deg
     assert np.max(np.abs(np.degrees(x[[2, 5]] - x0[[2, 5]]))) < 1e-4  # deg/s
+
+
+def test_the_variance_gradient_is_the_variance_s_derivative() -> None:
+    # The errors-in-variables correction rests on d var / dx: against central differences of
+    # the variance along each patch normal turned into its hit's sensor frame by the motion.
+    data, mapping, noise, patches = _box()
+    idx = np.flatnonzero(patches.used)[::50]
+    analytic = PatchFit(data, noise, patches, corrected=True).variance_gradient(mapping, idx)
+    n_T = patches.normal[patches.patch[idx]]
+
+    def variance(x: np.ndarray) -> np.ndarray:
+        m = LineMapping(x, data.tau_s, tuple(range(9)))
+        n_obs = np.einsum("nij,ni->nj", m.Rt[data.line[idx]], n_T)
+        return normal_variance(noise, data.xyz_m[idx], n_obs)
+
+    h = 1e-6
+    for j in range(9):
+        step = np.zeros(9)
+        step[j] = h
+        numeric = (variance(mapping.x + step) - variance(mapping.x - step)) / (2 * h)
+        scale = np.max(np.abs(analytic))
+        assert np.allclose(analytic[:, j], numeric, rtol=1e-4, atol=1e-5 * scale), j
+    assert np.max(np.abs(analytic[:, :6])) > 0  # the turning parameters move it; the centre does not
