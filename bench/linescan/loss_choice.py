@@ -35,7 +35,7 @@ import numpy as np
 
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import cauchy_curvature
-from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
+from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, cauchyweights, robust_sigma
 from tumblescan.linescan.validation import canonical_cov
 
 from ..common import machine, out_dir, table
@@ -75,6 +75,19 @@ LOSSES: dict[str, Loss] = {
 REWEIGHTED = f"cauchy {CAUCHY_C:g}, one reweighted step (short of its optimum)"
 
 
+def normalised(lin: Linearized) -> tuple[np.ndarray, float, np.ndarray]:
+    """The residuals over their sigmas ``e``, their robust scale ``s`` and the Jacobian over the sigmas."""
+    sd = np.sqrt(lin.var)
+    e = lin.r / sd
+    return e, max(robust_sigma(e), 1e-12), lin.J / sd[:, None]
+
+
+def newton_step(e: np.ndarray, s: float, Jn: np.ndarray, loss: Loss) -> np.ndarray:
+    """The optimum of ``loss`` to first order: ``H^-1 J^T psi(e / s) s`` with ``H = J^T diag(rho''(e / s)) J``."""
+    psi, curvature = loss(e / s)
+    return np.asarray(np.linalg.solve(Jn.T @ (Jn * curvature[:, None]), Jn.T @ psi * s))
+
+
 def case(name: str, distance_m: float, seed: int, size: int) -> dict[str, list[float]]:
     """Error / bound per parameter of each loss's Newton step from the truth (and the reweighted one)."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
@@ -84,10 +97,7 @@ def case(name: str, distance_m: float, seed: int, size: int) -> dict[str, list[f
     b = bound_covariances(motion, scene, sim, T)
     bound = bound_sigmas(b.x, b.facets)
     _, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
-    sd = np.sqrt(lin.var)
-    e = lin.r / sd
-    s = max(robust_sigma(e), 1e-12)
-    Jn = lin.J / sd[:, None]
+    e, s, Jn = normalised(lin)
     x = mapping.x
 
     def over_bound(dx: np.ndarray) -> list[float]:
@@ -96,8 +106,7 @@ def case(name: str, distance_m: float, seed: int, size: int) -> dict[str, list[f
 
     out = {}
     for label, loss in LOSSES.items():
-        psi, curvature = loss(e / s)
-        out[label] = over_bound(np.linalg.solve(Jn.T @ (Jn * curvature[:, None]), Jn.T @ psi * s))
+        out[label] = over_bound(newton_step(e, s, Jn, loss))
     w = cauchyweights(e, s)
     out[REWEIGHTED] = over_bound(np.linalg.solve(Jn.T @ (Jn * w[:, None]), Jn.T @ (w * e)))
     return out

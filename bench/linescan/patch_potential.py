@@ -56,16 +56,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Scanner, Scene, random_motion
-from tumblescan.linescan.dense.covariance import cauchy_curvature
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.matching import CAUCHY_C, robust_sigma
+from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
 from tumblescan.linescan.validation import canonical_cov
 
 from ..common import machine, out_dir, table
 from .dense_bound import bound_covariances, bound_sigmas, face_of_hits, last_stage_matches, motion_sigmas_deg
+from .loss_choice import cauchy, newton_step, normalised
 from .real_shapes import PARAMS, UNITS, shape_named
 from .reuse_diag import at_truth
 
@@ -85,15 +85,20 @@ _DIRECTIONS = np.array(
 DIRECTIONS = _DIRECTIONS / np.linalg.norm(_DIRECTIONS, axis=1)[:, None]
 
 
-def noise_product(noise: SensorNoise, xyz_obs: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    """``a_i^T Sigma_i b_i`` per row, ``Sigma_i = (s_a rho)^2 I + (s_r^2 - (s_a rho)^2) s s^T`` the
-    noise of the hit ``xyz_obs`` (sensor frame, m) with line of sight ``s``; ``a``, ``b`` ``(n, 3)``
-    in the sensor frame. Returns m^2."""
+def noise_times(noise: SensorNoise, xyz_obs: FloatArray, b: FloatArray) -> FloatArray:
+    """``Sigma_i b_i`` per row ``(n, 3)`` (m^2), ``Sigma_i = (s_a rho)^2 I + (s_r^2 - (s_a rho)^2) s s^T``
+    the noise of the hit ``xyz_obs`` (sensor frame, m) with line of sight ``s``; ``b`` ``(n, 3)`` in
+    the sensor frame."""
     rho = np.linalg.norm(xyz_obs, axis=1)
     s = xyz_obs / rho[:, None]
     across = (noise.angle_sigma_rad * rho) ** 2
-    along = np.einsum("ni,ni->n", s, a) * np.einsum("ni,ni->n", s, b)
-    return np.asarray(across * np.einsum("ni,ni->n", a, b) + (noise.range_sigma_m**2 - across) * along)
+    along = (noise.range_sigma_m**2 - across) * np.einsum("ni,ni->n", s, b)
+    return np.asarray(across[:, None] * b + along[:, None] * s)
+
+
+def noise_product(noise: SensorNoise, xyz_obs: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a_i^T Sigma_i b_i`` per row (m^2): :func:`noise_times` seen along ``a`` ``(n, 3)``."""
+    return np.asarray(np.einsum("ni,ni->n", a, noise_times(noise, xyz_obs, b)))
 
 
 def plane_fit(
@@ -152,9 +157,8 @@ def cut_patches(xyz_T: FloatArray, cell_normal_T: FloatArray, planar: BoolArray,
     """Patches of the planar hits: cubes ``voxel_m`` wide at ``T``, split by the nearest of 26
     directions to the hit's cell's normal (two faces of an edge fall apart). xyz_T, cell_normal_T:
     ``(n, 3)``; planar: ``(n,)`` the hits of planar surfels."""
-    cube = np.floor((xyz_T - xyz_T.min(axis=0)) / voxel_m).astype(np.int64)
     direction = np.argmax(cell_normal_T @ DIRECTIONS.T, axis=1)
-    key = _cube_key(cube) * 32 + direction
+    key = cube_keys(xyz_T, voxel_m) * 32 + direction
     keys, inverse = np.unique(key[planar], return_inverse=True)
     patch = np.full(len(xyz_T), -1, dtype=np.int64)
     patch[planar] = inverse
@@ -231,18 +235,18 @@ class PatchFit:
         mapping = LineMapping(x, data.tau_s, tuple(range(9)))
         idx = np.flatnonzero(pt.used)
         hits = self.hits(mapping, idx)
-        cauchy = np.ones(len(idx))
+        robust = np.ones(len(idx))
         for _ in range(PLANE_PASSES):
-            r, _, _ = self.planes(hits, cauchy)
+            r, _, _ = self.planes(hits, robust)
             e = r / np.sqrt(hits.var)
             scale = max(robust_sigma(e), 1e-12)
-            cauchy = 1.0 / (1.0 + (e / (CAUCHY_C * scale)) ** 2)
-        r, plane, normal_matrix = self.planes(hits, cauchy)
+            robust = cauchyweights(e, scale)
+        r, plane, normal_matrix = self.planes(hits, robust)
         k = hits.k
         # The plane's slope turns the normal each hit's motion is measured along.
         g = pt.normal[k] - plane[k, 1:2] * pt.e1[k] - plane[k, 2:3] * pt.e2[k]
         J = mapping.normal_derivative(g, data.xyz_m[idx], data.line[idx])
-        weight = cauchy / hits.var
+        weight = robust / hits.var
         a = np.column_stack([np.ones(len(idx)), hits.uv])
         B = np.zeros((len(pt.centre), 3, J.shape[1]))
         for j in range(3):
@@ -261,14 +265,7 @@ class PatchFit:
         ``d var = 2 n^T d(R^T) (Sigma n_obs)``; the centre does not turn the normal."""
         assert mapping.free == tuple(range(9))
         n = self.patches.normal[self.patches.patch[idx]]
-        xyz, n_obs = self.data.xyz_m[idx], self._obs(mapping, idx, n)
-        rho = np.linalg.norm(xyz, axis=1)
-        s = xyz / rho[:, None]
-        across = (self.noise.angle_sigma_rad * rho) ** 2
-        sigma_n = (
-            across[:, None] * n_obs
-            + ((self.noise.range_sigma_m**2 - across) * np.einsum("ni,ni->n", s, n_obs))[:, None] * s
-        )
+        sigma_n = noise_times(self.noise, self.data.xyz_m[idx], self._obs(mapping, idx, n))
         # normal_derivative contracts n^T d(R^T) (v - centre); its centre columns are dropped.
         dv = 2.0 * mapping.normal_derivative(n, sigma_n + mapping.center, self.data.line[idx])
         dv[:, 6:] = 0.0
@@ -286,25 +283,22 @@ class PatchFit:
         return x, H, scale, last
 
 
-def gate_hits(fit: PatchFit, mapping: LineMapping, cube_m: float) -> Patches:
+def gate_hits(fit: PatchFit, mapping: LineMapping, xyz_T: FloatArray, cube_m: float) -> Patches:
     """Every hit outside the planar surfels given the plane of its cube it lies on within
     ``GATE_SIGMAS`` (the nearest in sigmas), then the patches with fewer than ``MIN_PATCH_POINTS``
-    hits dropped."""
+    hits dropped. xyz_T: ``(n, 3)`` every hit at ``T`` under ``mapping``, as the patches were cut."""
     pt, data = fit.patches, fit.data
     idx = np.flatnonzero(pt.used)
     _, plane, _ = fit.planes(fit.hits(mapping, idx), np.ones(len(idx)))
-    xyz_T = mapping.apply(data.xyz_m, data.line)
-    origin = xyz_T.min(axis=0)
-    cube_of = np.floor((xyz_T - origin) / cube_m).astype(np.int64)
+    cube = cube_keys(xyz_T, cube_m)
     best, best_z = pt.patch.copy(), np.full(len(xyz_T), np.inf)
     others = np.flatnonzero(~pt.used)
     # Hits and patches keyed by cube: each hit is tried against every patch of its cube.
-    members_key = _cube_key(cube_of[idx])
     patch_key = np.full(len(pt.centre), -1, dtype=np.int64)
-    patch_key[pt.patch[idx]] = members_key
+    patch_key[pt.patch[idx]] = cube[idx]
     order = np.argsort(patch_key, kind="stable")
     sorted_keys = patch_key[order]
-    hit_key = _cube_key(cube_of[others])
+    hit_key = cube[others]
     lo, hi = np.searchsorted(sorted_keys, hit_key, "left"), np.searchsorted(sorted_keys, hit_key, "right")
     for offset in range(int((hi - lo).max(initial=0))):
         ok = lo + offset < hi
@@ -312,7 +306,7 @@ def gate_hits(fit: PatchFit, mapping: LineMapping, cube_m: float) -> Patches:
         d = xyz_T[hits] - pt.centre[k]
         u, v = np.einsum("ni,ni->n", d, pt.e1[k]), np.einsum("ni,ni->n", d, pt.e2[k])
         off = np.einsum("ni,ni->n", d, pt.normal[k]) - plane[k, 0] - plane[k, 1] * u - plane[k, 2] * v
-        n_obs = np.einsum("nij,ni->nj", mapping.Rt[data.line[hits]], pt.normal[k])
+        n_obs = fit._obs(mapping, hits, pt.normal[k])
         z = np.abs(off) / np.sqrt(normal_variance(fit.noise, data.xyz_m[hits], n_obs))
         better = z < best_z[hits]
         best[hits[better]], best_z[hits[better]] = k[better], z[better]
@@ -320,7 +314,9 @@ def gate_hits(fit: PatchFit, mapping: LineMapping, cube_m: float) -> Patches:
     return _drop_small(replace(pt, patch=joined))
 
 
-def _cube_key(cube: IntArray) -> IntArray:
+def cube_keys(xyz_T: FloatArray, cube_m: float) -> IntArray:
+    """One key per hit ``(n,)`` for its cube ``cube_m`` wide, counted from the hits' lowest corner."""
+    cube = np.floor((xyz_T - xyz_T.min(axis=0)) / cube_m).astype(np.int64)
     return np.asarray((cube[:, 0] * 100_003 + cube[:, 1]) * 100_003 + cube[:, 2])
 
 
@@ -342,14 +338,9 @@ def true_faces_only(pt: Patches, face: IntArray) -> Patches:
 
 
 def surfel_pairs_step(data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise) -> FloatArray:
-    """The fit's design: the Cauchy cost's Newton step from the truth (as ``loss_choice.py``)."""
+    """The fit's design: the Cauchy cost's Newton step from the truth (``loss_choice.py``'s)."""
     _, lin = last_stage_matches(data, mapping, surf, noise)
-    sd = np.sqrt(lin.var)
-    e = lin.r / sd
-    s = max(robust_sigma(e), 1e-12)
-    Jn = lin.J / sd[:, None]
-    psi = (e / s) / (1 + (e / s / CAUCHY_C) ** 2)
-    return np.asarray(np.linalg.solve(Jn.T @ (Jn * cauchy_curvature(e / s, CAUCHY_C)[:, None]), Jn.T @ psi * s))
+    return newton_step(*normalised(lin), cauchy(CAUCHY_C))
 
 
 DESIGNS = (
@@ -386,7 +377,7 @@ def case(name: str, distance_m: float, seed: int, size: int, voxel: float, itera
     planar = np.asarray(surf.planar[surf.point_cell])
     cube_m = voxel * data.surfel_m
     planes = _drop_small(cut_patches(xyz_T, cell_normal_T, planar, cube_m))
-    every = gate_hits(PatchFit(data, noise, planes, corrected=True), mapping, cube_m)
+    every = gate_hits(PatchFit(data, noise, planes, corrected=True), mapping, xyz_T, cube_m)
     face = face_of_hits(scene, motion, sim.reference_m)[0]
     designs = {
         "planar cells, raw": (planes, False),
