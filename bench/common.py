@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import platform
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +34,41 @@ def table(rows: Sequence[Sequence[object]], header: Sequence[str]) -> str:
     lines = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def grouped_bars(
+    ax: Any, groups: Sequence[str], series: Mapping[str, Sequence[float]], *, hatched: str | None = None
+) -> dict[str, np.ndarray]:
+    """Each series' bars side by side over the ``groups`` on a matplotlib axis, ticked with the
+    groups' names (the series named ``hatched``, if any, hatched); each series' bar positions."""
+    width = 0.8 / len(series)
+    at = {}
+    for i, (label, values) in enumerate(series.items()):
+        at[label] = np.arange(len(groups)) + (i - (len(series) - 1) / 2) * width
+        ax.bar(at[label], values, width, label=label, hatch="//" if label == hatched else None)
+    ax.set_xticks(np.arange(len(groups)), groups)
+    return at
+
+
+@contextmanager
+def saved_figure(
+    path: Path, *, title: str, ylabel: str, size: tuple[float, float] = (9, 4.5), legend_columns: int = 1
+) -> Iterator[Any]:
+    """A matplotlib axis to draw on (off screen), titled, labelled, with its legend, and saved
+    to ``path`` when the block ends."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=size)
+    yield ax
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=legend_columns)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def machine() -> str:

@@ -176,6 +176,21 @@ def face_of_hits(scene: Scene, motion: Motion, reference_m: FloatArray) -> tuple
     return face.astype(np.int64), normals_body @ R.T
 
 
+def majority_face(member_of: IntArray, face: IntArray, m: int) -> IntArray:
+    """Each of ``m`` groups' most common face (the largest index among equals) over its members
+    ``member_of`` ``(n,)`` whose ``face`` ``(n,)`` is known (``>= 0``); ``-1`` for a group with none."""
+    ok = face >= 0
+    pairs, counts = np.unique(np.column_stack([member_of[ok], face[ok]]), axis=0, return_counts=True)
+    out = np.full(m, -1, dtype=np.int64)
+    if len(pairs) == 0:
+        return out
+    order = np.lexsort((pairs[:, 1], counts, pairs[:, 0]))
+    group = pairs[order, 0]
+    last = np.r_[group[1:] != group[:-1], True]  # per group, the largest count (then face) sorts last
+    out[group[last]] = pairs[order, 1][last]
+    return out
+
+
 def motion_sigmas_deg(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
     """The 1-sigma of the spin axis, spin rate, precession axis and precession rate (deg, deg/s)
     of the motion ``x`` with covariance ``cov`` (the motion's parameter order)."""

@@ -11,8 +11,9 @@ direction), the hits the build hands from a cell that is not planar to a planar 
 (:func:`~tumblescan.linescan.dense.faces.assign_to_faces`), all hits in planar surfels, and the
 hits left out of them. Then each planar surfel against its majority face: its anchor's offset
 along the true normal (mean and RMS over its own sigma ``sqrt(v / N)``), and its normal's tilt,
-over its predicted sigma and along the in-plane direction of the line of sight (mean, with its
-standard error: a systematic tilt shows there).
+over its predicted sigma and along the face in the direction away from the sensor (mean, with
+its standard error: a systematic tilt shows there). A surfel's normal is pooled over its
+neighbours of every frame, so the surfels' standard errors are taken by face (cluster-robust).
 """
 
 from __future__ import annotations
@@ -26,9 +27,8 @@ import numpy as np
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.surfels import normal_variance
 
-from ..common import machine, out_dir, table
-from .dense_bound import face_of_hits
-from .hit_pairs import majority_face
+from ..common import grouped_bars, machine, out_dir, saved_figure, table
+from .dense_bound import face_of_hits, majority_face
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
 
@@ -50,11 +50,20 @@ def true_planes(face: np.ndarray, points_T: np.ndarray, sensor_T: np.ndarray) ->
     return normals, offsets
 
 
+def clustered_mean(x: np.ndarray, cluster: np.ndarray) -> tuple[float, float]:
+    """The mean of ``x`` and its standard error with the values of one ``cluster`` taken as
+    correlated (the cluster-robust variance ``sum_c (sum_{i in c} (x_i - mean))^2 / n^2``)."""
+    m = float(x.mean())
+    _, c = np.unique(cluster, return_inverse=True)
+    return m, float(np.sqrt(np.sum(np.bincount(c, x - m) ** 2)) / len(x))
+
+
 def case(name: str, distance_m: float, seed: int, draws: int) -> dict[str, float]:
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(), shape=shape_named(name))
     noise = scene.scanner.noise
-    sums: dict[str, list[float]] = {}
+    z_of: dict[str, list[np.ndarray]] = {}
+    offset, tilt2, along, face_id = [], [], [], []
     for draw in range(draws):
         sim, data, mapping, surf = at_truth(motion, scene, seed + 1000 * draw)
         kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
@@ -75,44 +84,41 @@ def case(name: str, distance_m: float, seed: int, draws: int) -> dict[str, float
             "left out": ~in_surfel,
         }
         for label, sel in sets.items():
-            sums.setdefault(f"{label}: sum z", []).append(float(z[sel & on].sum()))
-            sums.setdefault(f"{label}: hits", []).append(float(np.sum(sel & on)))
+            z_of.setdefault(label, []).append(z[sel & on])
         # The planar surfels against their majority face.
         sf = majority_face(surf.point_cell, face, len(surf.planar))
         pl = np.flatnonzero(surf.planar & (sf >= 0))
         anchor = mapping.apply(surf.anchor_obs[pl], surf.line[pl])
-        normal = mapping.rotate(surf.normal_obs[pl], surf.line[pl])
         n_true = normals[sf[pl]]
-        off = (np.einsum("ni,ni->n", n_true, anchor) - offsets[sf[pl]]) / np.sqrt(surf.var_m2[pl] / surf.count[pl])
+        offset.append(
+            (np.einsum("ni,ni->n", n_true, anchor) - offsets[sf[pl]]) / np.sqrt(surf.var_m2[pl] / surf.count[pl])
+        )
+        # The normal's error, and its part along the face in the direction away from the sensor.
+        tilt = mapping.rotate(surf.normal_obs[pl], surf.line[pl]) - n_true
         sight = anchor - mapping.apply(np.zeros_like(anchor), surf.line[pl])
         sight -= np.einsum("ni,ni->n", sight, n_true)[:, None] * n_true
         sight /= np.maximum(np.linalg.norm(sight, axis=1), 1e-12)[:, None]
-        tilt = normal - n_true
-        along = np.einsum("ni,ni->n", tilt, sight)
-        sums.setdefault("anchors: sum", []).append(float(off.sum()))
-        sums.setdefault("anchors: sum sq", []).append(float(np.sum(off**2)))
-        sums.setdefault("anchors", []).append(float(len(pl)))
-        sums.setdefault("tilt over sigma: sum sq", []).append(
-            float(np.sum(np.sum(tilt**2, axis=1) / surf.normal_var_rad2[pl]))
-        )
-        sums.setdefault("tilt along sight: sum", []).append(float(along.sum()))
-        sums.setdefault("tilt along sight: sum sq", []).append(float(np.sum(along**2)))
-    t = {k: float(np.sum(v)) for k, v in sums.items()}
+        tilt2.append(np.sum(tilt**2, axis=1) / surf.normal_var_rad2[pl])
+        along.append(np.einsum("ni,ni->n", tilt, sight))
+        face_id.append(sf[pl] + 1_000_000 * draw)  # a face of one draw is one cluster
     out: dict[str, float] = {}
-    for label in sets:
-        k = t[f"{label}: hits"]
-        out[f"{label}: hits a draw"] = k / draws
-        out[f"{label}: mean z"] = t[f"{label}: sum z"] / k
-        out[f"{label}: mean z / SE"] = t[f"{label}: sum z"] / np.sqrt(k)
-    k = t["anchors"]
-    out["anchor offset / sigma: mean"] = t["anchors: sum"] / k
-    out["anchor offset / sigma: mean / SE"] = t["anchors: sum"] / np.sqrt(k)
-    out["anchor offset / sigma: RMS"] = float(np.sqrt(t["anchors: sum sq"] / k))
-    out["normal tilt / sigma: RMS (2 dof: 1.41)"] = float(np.sqrt(t["tilt over sigma: sum sq"] / k))
-    mean_along = t["tilt along sight: sum"] / k
-    sd_along = np.sqrt(t["tilt along sight: sum sq"] / k - mean_along**2)
-    out["normal tilt along the sight: mean (mdeg)"] = float(np.degrees(mean_along) * 1e3)
-    out["normal tilt along the sight: mean / SE"] = float(mean_along / (sd_along / np.sqrt(k)))
+    for label, zs in z_of.items():
+        z_all = np.concatenate(zs)  # each hit's noise its own: independent
+        out[f"{label}: hits a draw"] = len(z_all) / draws
+        out[f"{label}: mean z"] = float(z_all.mean())
+        out[f"{label}: mean z / SE"] = float(z_all.sum() / np.sqrt(len(z_all)))
+    # A surfel's normal is pooled over its neighbours of every frame: the surfels of one face are
+    # not independent, and their standard errors are taken by face.
+    clusters = np.concatenate(face_id)
+    m, se = clustered_mean(np.concatenate(offset), clusters)
+    out["anchor offset / sigma: mean"] = m
+    out["anchor offset / sigma: mean / SE (by face)"] = m / se
+    out["anchor offset / sigma: RMS"] = float(np.sqrt(np.mean(np.concatenate(offset) ** 2)))
+    out["normal tilt / sigma: RMS (1.41 if isotropic)"] = float(np.sqrt(np.mean(np.concatenate(tilt2))))
+    m, se = clustered_mean(np.concatenate(along), clusters)
+    out["normal tilt along the face, away from the sensor: mean (mdeg)"] = float(np.degrees(m) * 1e3)
+    out["normal tilt along the face, away from the sensor: mean / SE (by face)"] = m / se
+    out["faces"] = float(len(np.unique(clusters)))
     return out
 
 
@@ -138,27 +144,16 @@ def main() -> None:
 
 
 def _plot(results: dict[str, dict[str, float]], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    keys = [k for k in next(iter(results.values())) if k.endswith("/ SE")]
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    width = 0.8 / len(results)
-    for i, (spec, r) in enumerate(results.items()):
-        ax.bar(np.arange(len(keys)) + (i - (len(results) - 1) / 2) * width, [r[k] for k in keys], width, label=spec)
-    for y in (-2, 2):
-        ax.axhline(y, color="k", lw=0.8, ls=":")
-    ax.set_xticks(
-        np.arange(len(keys)), [k.replace(" / SE", "").replace(": mean", "") for k in keys], rotation=25, ha="right"
-    )
-    ax.set_ylabel("mean over its standard error")
-    ax.set_title("Hit sets and surfels against the true faces (|value| > 2: not noise)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    keys = [k for k in next(iter(results.values())) if "/ SE" in k]
+    names = [k.split(": mean")[0] for k in keys]
+    title = "Hit sets and surfels against the true faces (|value| > 2: not noise)"
+    with saved_figure(path, title=title, ylabel="mean over its standard error") as ax:
+        grouped_bars(ax, names, {spec: [r[k] for k in keys] for spec, r in results.items()})
+        for label in ax.get_xticklabels():
+            label.set_rotation(25)
+            label.set_horizontalalignment("right")
+        for y in (-2, 2):
+            ax.axhline(y, color="k", lw=0.8, ls=":")
 
 
 if __name__ == "__main__":

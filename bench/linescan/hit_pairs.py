@@ -1,7 +1,8 @@
 """The hits the surfels leave out, each matched to the nearest planar surfel of a partner frame.
 
     python -m bench.linescan.hit_pairs [--motions 5] [--shapes box long-array] [--distances 50 100]
-                                       [--oracle] [--no-handover] [--stem NAME] [--report A.json B.json]
+                                       [--oracle] [--no-handover] [--stem NAME]
+    python -m bench.linescan.hit_pairs --report A.json B.json [--baseline C.json D.json]
 
 Measured at the true motion, as ``loss_choice.py`` measures the fit's loss: the fit's surfel
 pairs (the last stage's matches built at the truth) and, beside them, the hits outside every
@@ -13,18 +14,19 @@ the nearest planar surfel ``a_t`` of ``b`` (within one surfel size at ``T``) and
 with ``var_x`` the hit's sensor variance along ``n_t`` and the plane facing the hit's sensor.
 The hits of one cell matched to one target are one residual: their mean ``r`` and ``J``, and
 
-    var = mean(var_x) / k + v_t / N_t + mean(offset^2) v_nt
+    var = mean(var_x) / k + v_t / N_t + |mean in-plane offset|^2 v_nt
 
-(the target's noise enters once per group, as a pair's does). Designs, each the Cauchy cost's
-optimum to first order from the truth (one Newton step, each block at its own robust scale):
-the pairs, the pairs with the groups, the groups alone, and the groups by generalised least
-squares with each target's anchor noise a random effect shared by its groups, alone and beside
-the pairs; with their own sigmas (the residuals taken as independent). ``--oracle``: also only
-the groups whose hits lie on their target's face of the mesh. ``--no-handover``: the surfels
-built without handing points across edges (``faces.assign_to_faces``).
+(the target's anchor and tilt enter once per group, as a pair's do). Designs, each the Cauchy
+cost's optimum to first order from the truth (one Newton step, each block at its own robust
+scale): the pairs, the pairs with the groups, the groups alone; and their sigmas, the sandwich
+clustered by source cell (a hit is in up to one group per partner frame; a pair's source surfel
+in one pair per partner frame). ``--oracle``: also only the groups whose hits lie on their
+target's face of the mesh. ``--no-handover``: the surfels built without handing points across
+edges (``faces.assign_to_faces``).
 
 Prints per shape the RMS over the cases and the four parameters of error / dense bound, and its
-difference from the pairs' as a 90 % bootstrap interval over the cases; writes a JSON and a plot.
+difference from the pairs' as a 90 % bootstrap interval over the cases (or, with ``--baseline``,
+from the same design in other runs of the same cases, paired by case); writes a JSON and a plot.
 """
 
 from __future__ import annotations
@@ -33,213 +35,164 @@ import argparse
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense import surfels
-from tumblescan.linescan.dense.covariance import cauchy_curvature
+from tumblescan.linescan.dense.covariance import sandwich
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, robust_sigma
+from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise
-from tumblescan.linescan.validation import canonical_cov
 
-from ..common import machine, out_dir, table
-from .dense_bound import bound_covariances, bound_sigmas, face_of_hits, last_stage_matches, motion_sigmas_deg
-from .real_shapes import PARAMS, UNITS, shape_named
-from .reuse_diag import at_truth
+from ..common import grouped_bars, machine, out_dir, saved_figure, table
+from .dense_bound import face_of_hits, last_stage_matches, majority_face
+from .loss_choice import cauchy, newton_system, normalised, over_bound, truth_case
 
 MAX_INPLANE = 0.75  # surfel sizes
 GATE_SIGMAS = 3.0
 
 
-def hit_groups(
+@dataclass(frozen=True)
+class HitMatches:
+    """Each matched hit ``(k,)``: the hit, its target surfel and its group (one per source cell
+    and target, ``0 .. groups - 1``); and each group's source cell ``(groups,)``."""
+
+    hit: np.ndarray
+    target: np.ndarray
+    group: np.ndarray
+    cell: np.ndarray
+
+
+def match_hits(
     data: DenseData,
     mapping: LineMapping,
     surf: Surfels,
     noise: SensorNoise,
     *,
     faces: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[HitGroups, float]:
-    """The left-out hits' groups (see the module) and the share of all hits they use."""
+) -> tuple[HitMatches, float]:
+    """The left-out hits matched to partner frames' planar surfels (see the module), and the
+    share of all hits matched. faces: each hit's face of the mesh and each surfel's majority
+    face; only hits on their target's face are matched (an oracle)."""
     h_all = np.flatnonzero(~surf.planar[surf.point_cell])
     x_ref = mapping.apply(data.xyz_m[h_all], data.line[h_all])
     sensor_ref = mapping.apply(np.zeros((len(h_all), 3)), data.line[h_all])
     anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
     normal_ref = mapping.rotate(surf.normal_obs, surf.line)
-    m = len(surf.planar)
-    rs, Js, vs, ts = [], [], [], []
-    used = np.zeros(len(h_all), dtype=bool)
+    hits, targets = [], []
     for b in range(data.n_frames):
-        targets = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
         sel = np.flatnonzero(data.frame[h_all] != b)
-        if len(targets) == 0 or len(sel) == 0:
+        if len(in_b) == 0 or len(sel) == 0:
             continue
-        dist, nn = cKDTree(anchor_ref[targets]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m)
+        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m)
         ok = np.isfinite(dist)
-        sel, t = sel[ok], targets[nn[ok]]
+        sel, t = sel[ok], in_b[nn[ok]]
         n = normal_ref[t]
         d = x_ref[sel] - anchor_ref[t]
         r = np.einsum("ni,ni->n", n, d)
-        off2 = np.einsum("ni,ni->n", d, d) - r**2
         h = h_all[sel]
-        n_obs = np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n)
-        var_x = normal_variance(noise, data.xyz_m[h], n_obs)
-        var_t = surf.var_m2[t] / surf.count[t]
+        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
         facing = np.einsum("ni,ni->n", n, sensor_ref[sel] - x_ref[sel]) > 0
-        keep = facing & (off2 <= (MAX_INPLANE * data.surfel_m) ** 2) & (r**2 <= GATE_SIGMAS**2 * (var_x + var_t))
+        beside = np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE * data.surfel_m) ** 2
+        keep = facing & beside & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
         if faces is not None:
-            keep &= faces[0][h] == faces[1][t]
-        sel, t, n, r, off2, h, var_x = sel[keep], t[keep], n[keep], r[keep], off2[keep], h[keep], var_x[keep]
-        if len(sel) == 0:
-            continue
-        used[sel] = True
-        J = mapping.normal_derivative(n, data.xyz_m[h], data.line[h]) - mapping.normal_derivative(
-            n, surf.anchor_obs[t], surf.line[t]
-        )
-        _, group, k = np.unique(data.cell[h] * m + t, return_inverse=True, return_counts=True)
-        g = len(k)
-
-        def mean(v: np.ndarray, group: np.ndarray = group, k: np.ndarray = k, g: int = g) -> np.ndarray:
-            return np.bincount(group, v, minlength=g) / k
-
-        t_g = np.zeros(g, dtype=np.int64)
-        t_g[group] = t
-        rs.append(mean(r))
-        Js.append(np.stack([mean(J[:, j]) for j in range(J.shape[1])], axis=1))
-        vs.append(mean(var_x) / k + surf.var_m2[t_g] / surf.count[t_g] + mean(off2) * surf.normal_var_rad2[t_g])
-        ts.append(t_g)
-    lin = Linearized(np.concatenate(rs), np.concatenate(Js), np.concatenate(vs))
-    target = np.concatenate(ts)
-    return HitGroups(lin, target, surf.var_m2[target] / surf.count[target]), float(used.sum()) / len(data.xyz_m)
+            keep &= (faces[0][h] >= 0) & (faces[0][h] == faces[1][t])
+        hits.append(h[keep])
+        targets.append(t[keep])
+    hit, target = np.concatenate(hits), np.concatenate(targets)
+    _, first, group = np.unique(data.cell[hit] * len(surf.planar) + target, return_index=True, return_inverse=True)
+    share = len(np.unique(hit)) / len(data.xyz_m)
+    return HitMatches(hit, target, group, data.cell[hit[first]]), share
 
 
-@dataclass(frozen=True)
-class HitGroups:
-    """The groups' residuals (``lin``, the variance with the target's share in it), each group's
-    target surfel and that target's anchor variance along its normal (m^2), which every group
-    matched to it shares."""
+def linearize_hits(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, m: HitMatches
+) -> Linearized:
+    """The groups' residuals at ``mapping``: mean ``r`` and ``J`` of each group's hits, and the
+    variance of the module."""
+    h, t = m.hit, m.target
+    n = mapping.rotate(surf.normal_obs[t], surf.line[t])
+    d = mapping.apply(data.xyz_m[h], data.line[h]) - mapping.apply(surf.anchor_obs[t], surf.line[t])
+    r = np.einsum("ni,ni->n", n, d)
+    var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+    J = mapping.normal_derivative(n, data.xyz_m[h], data.line[h]) - mapping.normal_derivative(
+        n, surf.anchor_obs[t], surf.line[t]
+    )
+    g = len(m.cell)
+    k = np.bincount(m.group, minlength=g).astype(float)
 
-    lin: Linearized
-    target: np.ndarray
-    shared_var: np.ndarray
+    def mean(v: np.ndarray) -> np.ndarray:
+        return np.bincount(m.group, v, minlength=g) / k
 
-
-def random_effect_system(groups: HitGroups) -> tuple[np.ndarray, np.ndarray]:
-    """Normal equations ``(H, g)`` of the groups by generalised least squares, each target's
-    anchor noise a random effect shared by its groups: per target, with ``w = 1 / v`` (``v`` a
-    group's own variance, the target's share taken out) and ``tau`` the target's,
-
-        H = sum w J J^T - (sum w J)(sum w J)^T / (1 / tau + sum w),   g likewise with ``r``."""
-    lin = groups.lin
-    w = 1.0 / (lin.var - groups.shared_var)
-    _, c = np.unique(groups.target, return_inverse=True)
-    k = int(c.max()) + 1
-    tau = np.zeros(k)
-    tau[c] = groups.shared_var
-    sw = np.bincount(c, w, minlength=k)
-    sJ = np.stack([np.bincount(c, w * lin.J[:, j], minlength=k) for j in range(lin.J.shape[1])], axis=1)
-    sr = np.bincount(c, w * lin.r, minlength=k)
-    shrink = 1.0 / (1.0 / tau + sw)
-    H = lin.J.T @ (lin.J * w[:, None]) - sJ.T @ (sJ * shrink[:, None])
-    g = lin.J.T @ (w * lin.r) - sJ.T @ (sr * shrink)
-    return np.asarray(H), np.asarray(g)
+    t_g = np.zeros(g, dtype=np.int64)
+    t_g[m.group] = t
+    # The target's tilt is common to its group: it enters at the group's mean in-plane offset.
+    along = d - r[:, None] * n
+    offset2 = sum(mean(along[:, i]) ** 2 for i in range(3))
+    var = mean(var_x) / k + surf.var_m2[t_g] / surf.count[t_g] + offset2 * surf.normal_var_rad2[t_g]
+    return Linearized(mean(r), np.stack([mean(J[:, j]) for j in range(J.shape[1])], axis=1), var)
 
 
-def cauchy_system(blocks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """The Cauchy cost's Newton system ``(H, g)`` at the truth over the stacked scaled blocks
-    ``(z, Jz)`` (:func:`scaled`): the step is ``H^-1 g``."""
-    z = np.concatenate([b[0] for b in blocks])
-    Jz = np.concatenate([b[1] for b in blocks])
-    psi = z / (1 + (z / CAUCHY_C) ** 2)
-    return np.asarray(Jz.T @ (Jz * cauchy_curvature(z, CAUCHY_C)[:, None])), np.asarray(Jz.T @ psi)
+def block_system(lin: Linearized) -> tuple[np.ndarray, np.ndarray, float]:
+    """A block's Cauchy Newton system ``(H, g)`` (``loss_choice.newton_system``) weighed by its
+    own robust scale ``s`` (its variances taken as ``s^2 var``), and ``s``."""
+    e, s, Jn = normalised(lin)
+    H, g = newton_system(e, s, Jn, cauchy(CAUCHY_C))
+    return H / s**2, g / s**2, s
 
 
-def majority_face(point_cell: np.ndarray, hit_face: np.ndarray, m: int) -> np.ndarray:
-    """Each surfel's most common face among its points (``-2`` for none)."""
-    nf = int(hit_face.max()) + 2
-    keys, counts = np.unique(point_cell * nf + hit_face + 1, return_counts=True)
-    cell, face = np.divmod(keys, nf)
-    order = np.lexsort((counts, cell))
-    out = np.full(m, -2, dtype=np.int64)
-    out[cell[order]] = face[order] - 1  # the last write per cell is its largest count
-    return out
+def step(blocks: list[Linearized]) -> np.ndarray:
+    """The Cauchy cost's Newton step from the truth over the blocks, each at its own scale."""
+    systems = [block_system(b) for b in blocks]
+    return np.asarray(np.linalg.solve(sum(x[0] for x in systems), sum(x[1] for x in systems)))
 
 
-def scaled(lin: Linearized) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals and Jacobian over their sigmas and the block's robust scale."""
-    sd = np.sqrt(lin.var)
-    e = lin.r / sd
-    s = max(robust_sigma(e), 1e-12)
-    return e / s, lin.J / (sd * s)[:, None]
-
-
-def cauchy_step(blocks: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-    """One Newton step of the Cauchy cost from the truth over the stacked blocks ``(z, Jz)``."""
-    H, g = cauchy_system(blocks)
-    return np.asarray(np.linalg.solve(H, g))
-
-
-def cauchy_cov(blocks: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-    """The sandwich covariance of that step, its residuals taken as independent."""
-    z = np.concatenate([b[0] for b in blocks])
-    Jz = np.concatenate([b[1] for b in blocks])
-    psi = z / (1 + (z / CAUCHY_C) ** 2)
-    Hi = np.linalg.inv(Jz.T @ (Jz * cauchy_curvature(z, CAUCHY_C)[:, None]))
-    return np.asarray(Hi @ (Jz.T @ (Jz * psi[:, None] ** 2)) @ Hi)
+def clustered_cov(blocks: list[tuple[Linearized, np.ndarray]]) -> np.ndarray:
+    """That step's covariance: the Cauchy sandwich clustered by each residual's source cell
+    (``covariance.sandwich``), each block's variances at its own scale."""
+    scaled = [(b, c, normalised(b)[1]) for b, c in blocks]
+    return sandwich(
+        np.vstack([b.J for b, _, _ in scaled]),
+        np.concatenate([b.r for b, _, _ in scaled]),
+        np.concatenate([b.var * s**2 for b, _, s in scaled]),
+        CAUCHY_C,
+        np.unique(np.concatenate([c for _, c, _ in scaled]), return_inverse=True)[1],
+        None,
+    )
 
 
 def case(
     name: str, distance_m: float, seed: int, size: int, *, oracle: bool
 ) -> tuple[dict[str, list[float]], float, float]:
-    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    noise = scene.scanner.noise
-    sim, data, mapping, surf = at_truth(motion, scene, seed)
-    T = float(sim.t_s.min())
-    bound = bound_sigmas(*(lambda b: (b.x, b.facets))(bound_covariances(motion, scene, sim, T)))
-    _, pairs = last_stage_matches(data, mapping, surf, noise)
-    hg, share = hit_groups(data, mapping, surf, noise)
-    groups = hg.lin
-    x = mapping.x
-
-    def over_bound(dx: np.ndarray) -> list[float]:
-        cov = np.outer(dx, dx) if dx.ndim == 1 else dx
-        sig = motion_sigmas_deg(x, canonical_cov(x, cov))
-        return [sig[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS]
-
-    p = scaled(pairs)
+    tc = truth_case(name, distance_m, seed, size)
+    data, mapping, surf, noise = tc.data, tc.mapping, tc.surf, tc.scene.scanner.noise
+    bound, x = tc.bound, mapping.x
+    pair_matches, pairs = last_stage_matches(data, mapping, surf, noise)
+    hm, share = match_hits(data, mapping, surf, noise)
+    groups = linearize_hits(data, mapping, surf, noise, hm)
+    p, g = (pairs, pair_matches.src), (groups, hm.cell)
     out = {
-        "surfel pairs": over_bound(cauchy_step([p])),
-        "pairs + hit groups": over_bound(cauchy_step([p, scaled(groups)])),
-        "hit groups alone": over_bound(cauchy_step([scaled(groups)])),
-        "sigma: pairs": over_bound(cauchy_cov([p])),
-        "sigma: pairs + hit groups": over_bound(cauchy_cov([p, scaled(groups)])),
-        "sigma: hit groups alone": over_bound(cauchy_cov([scaled(groups)])),
+        "surfel pairs": over_bound(x, bound, step([pairs])),
+        "pairs + hit groups": over_bound(x, bound, step([pairs, groups])),
+        "hit groups alone": over_bound(x, bound, step([groups])),
+        "sigma: pairs": over_bound(x, bound, clustered_cov([p])),
+        "sigma: pairs + hit groups": over_bound(x, bound, clustered_cov([p, g])),
+        "sigma: hit groups alone": over_bound(x, bound, clustered_cov([g])),
     }
-    # The groups by generalised least squares, the targets' noise shared (no robust loss: the
-    # gate has kept them within 3 sigmas), alone and beside the pairs' Cauchy system.
-    Hg, gg = random_effect_system(hg)
-    out["hit groups alone, shared targets"] = over_bound(np.linalg.solve(Hg, gg))
-    out["sigma: hit groups alone, shared targets"] = over_bound(np.linalg.inv(Hg))
-    # Each block weighed by its own robust scale, as the pairs' rows are (scaled()).
-    s_g2 = max(robust_sigma(groups.r / np.sqrt(groups.var)), 1e-12) ** 2
-    Hp, gp = cauchy_system([p])
-    out["pairs + hit groups, shared targets"] = over_bound(np.linalg.solve(Hp + Hg / s_g2, gp + gg / s_g2))
     if oracle:
-        # Only the groups whose hits lie on their target's face of the mesh (most of its points').
-        hit_face = face_of_hits(scene, motion, sim.reference_m)[0]
+        hit_face = face_of_hits(tc.scene, tc.motion, tc.sim.reference_m)[0]
         if data.kept is not None:
             hit_face = hit_face[data.kept]
         faces = (hit_face, majority_face(surf.point_cell, hit_face, len(surf.planar)))
-        same = scaled(hit_groups(data, mapping, surf, noise, faces=faces)[0].lin)
-        out["pairs + hit groups on the target's face"] = over_bound(cauchy_step([p, same]))
-        out["hit groups on the target's face alone"] = over_bound(cauchy_step([same]))
-    planar_share = float(np.mean(surf.planar[surf.point_cell]))
-    return out, planar_share, share
+        same = linearize_hits(data, mapping, surf, noise, match_hits(data, mapping, surf, noise, faces=faces)[0])
+        out["pairs + hit groups on the target's face"] = over_bound(x, bound, step([pairs, same]))
+        out["hit groups on the target's face alone"] = over_bound(x, bound, step([same]))
+    return out, float(np.mean(surf.planar[surf.point_cell])), share
 
 
 def paired_interval(
@@ -255,6 +208,75 @@ def paired_interval(
     return float(lo), float(hi)
 
 
+class Case(TypedDict):
+    """One case's designs (label: the four errors / bound) and shares of the hits used."""
+
+    shape: str
+    distance_m: float
+    seed: int
+    designs: dict[str, list[float]]
+    planar: float
+    share: float
+
+
+def run_cases(args: argparse.Namespace) -> list[Case]:
+    cases: list[Case] = []
+    for name in args.shapes:
+        for distance in args.distances:
+            for seed in range(args.first_seed, args.first_seed + args.motions):
+                designs, planar, share = case(name, distance, seed, args.size, oracle=args.oracle)
+                cases.append(
+                    {
+                        "shape": name,
+                        "distance_m": distance,
+                        "seed": seed,
+                        "designs": designs,
+                        "planar": planar,
+                        "share": share,
+                    }
+                )
+                print(f"  {name} {distance:g} m seed {seed} done", flush=True)
+    return cases
+
+
+def loaded(paths: list[str]) -> list[Case]:
+    return [c for path in paths for c in json.loads(Path(path).read_text())["cases"]]
+
+
+def summary(cases: list[Case], baseline: list[Case]) -> list[list[str]]:
+    """Per shape and design: cases, RMS error / bound, the 90 % interval of its difference from
+    the pairs' (or from the same design in ``baseline``, case by case), the hits used."""
+    key = {(c["shape"], c["distance_m"], c["seed"]): c for c in baseline}
+    rng = np.random.default_rng(0)
+    rows = []
+    for shape in dict.fromkeys(c["shape"] for c in cases):
+        mine = [c for c in cases if c["shape"] == shape]
+        planar = np.mean([c["planar"] for c in mine])
+        share = np.mean([c["share"] for c in mine])
+        for label in mine[0]["designs"]:
+            a = np.array([c["designs"][label] for c in mine])
+            if baseline:
+                both = [(i, b) for i, c in enumerate(mine) if (b := key.get((c["shape"], c["distance_m"], c["seed"])))]
+                both = [(i, b) for i, b in both if label in b["designs"]]
+                base = np.array([b["designs"][label] for _, b in both])
+                a_cmp = a[[i for i, _ in both]]
+            else:
+                base, a_cmp = np.array([c["designs"]["surfel pairs"] for c in mine]), a
+            compare = len(base) > 0 and (baseline or not (label.startswith("sigma") or label == "surfel pairs"))
+            lo, hi = paired_interval(a_cmp, base, rng) if compare else (np.nan, np.nan)
+            rows.append(
+                [
+                    shape,
+                    label,
+                    str(len(a)),
+                    f"{np.sqrt(np.mean(a**2)):.2f}",
+                    f"{lo:+.2f} .. {hi:+.2f}",
+                    f"{100 * planar:.1f} + {100 * share:.1f} %",
+                ]
+            )
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--motions", type=int, default=5)
@@ -268,77 +290,36 @@ def main() -> None:
         "--no-handover", action="store_true", help="the surfels built without handing points across edges"
     )
     parser.add_argument("--report", nargs="*", default=[], help="merge these JSON files instead of running")
+    parser.add_argument("--baseline", nargs="*", default=[], help="JSON files of the same cases to compare with")
     args = parser.parse_args()
     if args.no_handover:
         # Every point stays in its own cell (the build's assign_to_faces, switched off here only).
         surfels.assign_to_faces = lambda planes, candidate, face: planes.cell.copy()
     print(machine())
-    per: dict[str, dict[str, list[list[float]]]] = {}
-    shares: dict[str, list[list[float]]] = {}
-    for path in args.report:
-        got = json.loads(Path(path).read_text())
-        for name, by in got["cases"].items():
-            for k, v in by.items():
-                per.setdefault(name, {}).setdefault(k, []).extend(v)
-            shares.setdefault(name, []).extend(got["shares"][name])
-    for name in [] if args.report else args.shapes:
-        for distance in args.distances:
-            for seed in range(args.first_seed, args.first_seed + args.motions):
-                got, planar, share = case(name, distance, seed, args.size, oracle=args.oracle)
-                shares.setdefault(name, []).append([planar, share])
-                for k, v in got.items():
-                    per.setdefault(name, {}).setdefault(k, []).append(v)
-                print(f"  {name} {distance:g} m seed {seed} done", flush=True)
-    rng = np.random.default_rng(0)
-    rows = []
-    for name, by in per.items():
-        sh = np.mean(shares[name], axis=0)
-        base = np.asarray(by["surfel pairs"])
-        for k, v in by.items():
-            a = np.asarray(v)
-            lo, hi = (np.nan, np.nan) if k.startswith("sigma") or k == "surfel pairs" else paired_interval(a, base, rng)
-            rows.append(
-                [
-                    name,
-                    k,
-                    str(len(a)),
-                    f"{np.sqrt(np.mean(a**2)):.2f}",
-                    f"{lo:+.2f} .. {hi:+.2f}",
-                    f"{100 * sh[0]:.1f} + {100 * sh[1]:.1f} %",
-                ]
-            )
-    print("\nRMS over the cases and the four parameters of error / dense bound at each design's optimum from the truth")
-    print(
-        "('sigma': the design's own, its residuals taken as independent); the pairs' difference, 90 % over the cases:"
-    )
-    print(table(rows, ["shape", "design", "cases", "RMS / bound", "minus pairs", "hits: surfels + groups"]))
+    cases = loaded(args.report) if args.report else run_cases(args)
+    against = "the same design in the baseline" if args.baseline else "the pairs"
+    print("\nRMS over the cases and the four parameters of error / dense bound at each design's optimum from the")
+    print(f"truth ('sigma': the design's own, clustered by source cell); the difference from {against},")
+    print("90 % over the cases:")
+    header = ["shape", "design", "cases", "RMS / bound", "difference", "hits: surfels + groups"]
+    print(table(summary(cases, loaded(args.baseline)), header))
     out = out_dir()
-    (out / f"{args.stem}.json").write_text(json.dumps({"cases": per, "shares": shares}, indent=1))
-    _plot(per, out / f"{args.stem}.png")
+    (out / f"{args.stem}.json").write_text(json.dumps({"cases": cases}, indent=1))
+    _plot(cases, out / f"{args.stem}.png")
     print(f"wrote {out / args.stem}.json and .png")
 
 
-def _plot(per: dict[str, dict[str, list[list[float]]]], path: Path) -> None:
-    import matplotlib
+def _plot(cases: list[Case], path: Path) -> None:
+    shapes = list(dict.fromkeys(str(c["shape"]) for c in cases))
+    labels = [k for k in cases[0]["designs"] if not k.startswith("sigma")]
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    def rms(shape: str, label: str) -> float:
+        return float(np.sqrt(np.mean(np.square([c["designs"][label] for c in cases if c["shape"] == shape]))))
 
-    labels = [k for k in next(iter(per.values())) if not k.startswith("sigma")]
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    width = 0.8 / len(labels)
-    shapes = list(per)
-    for i, label in enumerate(labels):
-        rms = [np.sqrt(np.mean(np.square(per[s][label]))) for s in shapes]
-        ax.bar(np.arange(len(shapes)) + (i - (len(labels) - 1) / 2) * width, rms, width, label=label)
-    ax.axhline(1.0, color="k", lw=0.8, ls=":")
-    ax.set_xticks(np.arange(len(shapes)), shapes)
-    ax.set_ylabel("RMS error / dense bound")
-    ax.set_title("The left-out hits matched to partner surfels, at the truth (lower is better)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    title = "The left-out hits matched to partner surfels, at the truth (lower is better)"
+    with saved_figure(path, title=title, ylabel="RMS error / dense bound") as ax:
+        grouped_bars(ax, shapes, {k: [rms(s, k) for s in shapes] for k in labels})
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
 
 
 if __name__ == "__main__":

@@ -29,16 +29,21 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, random_motion
+from tumblescan import Motion, Scanner, Scene, random_motion
 from tumblescan.linescan.dense.covariance import cauchy_curvature
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, cauchyweights, robust_sigma
+from tumblescan.linescan.dense.surfels import Surfels
+from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import canonical_cov
 
-from ..common import machine, out_dir, table
+from ..common import grouped_bars, machine, out_dir, saved_figure, table
 from .dense_bound import bound_covariances, bound_sigmas, last_stage_matches, motion_sigmas_deg
 from .real_shapes import PARAMETRIC, PARAMS, UNITS, shape_named
 from .reuse_diag import at_truth
@@ -82,34 +87,61 @@ def normalised(lin: Linearized) -> tuple[np.ndarray, float, np.ndarray]:
     return e, max(robust_sigma(e), 1e-12), lin.J / sd[:, None]
 
 
-def newton_step(e: np.ndarray, s: float, Jn: np.ndarray, loss: Loss) -> np.ndarray:
-    """The optimum of ``loss`` to first order: ``H^-1 J^T psi(e / s) s`` with ``H = J^T diag(rho''(e / s)) J``."""
+def newton_system(e: np.ndarray, s: float, Jn: np.ndarray, loss: Loss) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, g)``: ``H = J^T diag(rho''(e / s)) J`` and ``g = J^T psi(e / s) s``, whose solution is
+    the optimum of ``loss`` to first order."""
     psi, curvature = loss(e / s)
-    return np.asarray(np.linalg.solve(Jn.T @ (Jn * curvature[:, None]), Jn.T @ psi * s))
+    return np.asarray(Jn.T @ (Jn * curvature[:, None])), np.asarray(Jn.T @ psi * s)
+
+
+def newton_step(e: np.ndarray, s: float, Jn: np.ndarray, loss: Loss) -> np.ndarray:
+    """The optimum of ``loss`` to first order: ``H^-1 J^T psi(e / s) s`` (:func:`newton_system`)."""
+    return np.asarray(np.linalg.solve(*newton_system(e, s, Jn, loss)))
+
+
+@dataclass(frozen=True)
+class TruthCase:
+    """One seeded case of the real-shapes bench at its true motion: the motion, scene and
+    frames, their dense data and line mapping, the surfels built there, and the dense bound."""
+
+    motion: Motion
+    scene: Scene
+    sim: FrameCloud
+    data: DenseData
+    mapping: LineMapping
+    surf: Surfels
+    bound: dict[str, float]
+
+
+def truth_case(name: str, distance_m: float, seed: int, size: int) -> TruthCase:
+    """``real_shapes.one``'s case (its seeded motion, frames and noise) at the truth."""
+    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
+    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
+    sim, data, mapping, surf = at_truth(motion, scene, seed)
+    b = bound_covariances(motion, scene, sim, float(sim.t_s.min()))
+    return TruthCase(motion, scene, sim, data, mapping, surf, bound_sigmas(b.x, b.facets))
 
 
 def case(name: str, distance_m: float, seed: int, size: int) -> dict[str, list[float]]:
     """Error / bound per parameter of each loss's Newton step from the truth (and the reweighted one)."""
-    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    sim, data, mapping, surf = at_truth(motion, scene, seed)
-    T = float(sim.t_s.min())
-    b = bound_covariances(motion, scene, sim, T)
-    bound = bound_sigmas(b.x, b.facets)
-    _, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
+    tc = truth_case(name, distance_m, seed, size)
+    _, lin = last_stage_matches(tc.data, tc.mapping, tc.surf, tc.scene.scanner.noise)
     e, s, Jn = normalised(lin)
-    x = mapping.x
-
-    def over_bound(dx: np.ndarray) -> list[float]:
-        sig = motion_sigmas_deg(x, canonical_cov(x, np.outer(dx, dx)))
-        return [sig[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS]
-
+    x, bound = tc.mapping.x, tc.bound
     out = {}
     for label, loss in LOSSES.items():
-        out[label] = over_bound(newton_step(e, s, Jn, loss))
+        out[label] = over_bound(x, bound, newton_step(e, s, Jn, loss))
     w = cauchyweights(e, s)
-    out[REWEIGHTED] = over_bound(np.linalg.solve(Jn.T @ (Jn * w[:, None]), Jn.T @ (w * e)))
+    out[REWEIGHTED] = over_bound(x, bound, np.linalg.solve(Jn.T @ (Jn * w[:, None]), Jn.T @ (w * e)))
     return out
+
+
+def over_bound(x: np.ndarray, bound: dict[str, float], step_or_cov: np.ndarray) -> list[float]:
+    """The spin axis, spin rate, precession axis and precession rate of a step from the truth
+    ``x`` (9-vector), or the sigmas of a covariance (9x9), over the dense ``bound``'s."""
+    cov = np.outer(step_or_cov, step_or_cov) if step_or_cov.ndim == 1 else step_or_cov
+    sig = motion_sigmas_deg(x, canonical_cov(x, cov))
+    return [sig[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS]
 
 
 def whole_estimates(path: str) -> dict[tuple[str, float, int], list[float]]:
@@ -162,30 +194,12 @@ def main() -> None:
 
 
 def _plot(rms: dict[str, dict[str, float]], labels: list[str], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.5))
     shapes = list(rms)
-    width = 0.8 / len(labels)
-    for i, label in enumerate(labels):
-        ax.bar(
-            np.arange(len(shapes)) + (i - (len(labels) - 1) / 2) * width,
-            [rms[s].get(label, np.nan) for s in shapes],
-            width,
-            label=label,
-            hatch="//" if label == REWEIGHTED else None,
-        )
-    ax.axhline(1.0, color="k", lw=0.8, ls=":")
-    ax.set_xticks(np.arange(len(shapes)), shapes)
-    ax.set_ylabel("RMS error / dense bound")
-    ax.set_title("Each loss's optimum from the truth (lower is better; 1 = efficient)")
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    series = {label: [rms[s].get(label, np.nan) for s in shapes] for label in labels}
+    title = "Each loss's optimum from the truth (lower is better; 1 = efficient)"
+    with saved_figure(path, title=title, ylabel="RMS error / dense bound", size=(10, 4.5), legend_columns=2) as ax:
+        grouped_bars(ax, shapes, series, hatched=REWEIGHTED)
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
 
 
 if __name__ == "__main__":

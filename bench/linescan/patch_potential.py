@@ -55,19 +55,20 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights, robust_sigma
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
 from tumblescan.linescan.sensor import SensorNoise, perpendiculars
-from tumblescan.linescan.validation import canonical_cov
 
-from ..common import machine, out_dir, table
-from .dense_bound import bound_covariances, bound_sigmas, face_of_hits, last_stage_matches, motion_sigmas_deg
-from .loss_choice import cauchy, newton_step, normalised
-from .real_shapes import PARAMS, UNITS, shape_named
-from .reuse_diag import at_truth
+from ..common import grouped_bars, machine, out_dir, saved_figure, table
+from .dense_bound import (
+    face_of_hits,
+    last_stage_matches,
+    majority_face,
+)
+from .loss_choice import cauchy, newton_step, normalised, truth_case
+from .loss_choice import over_bound as loss_choice_over_bound
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -329,10 +330,7 @@ def _drop_small(pt: Patches) -> Patches:
 def true_faces_only(pt: Patches, face: IntArray) -> Patches:
     """Each patch keeps only the hits of its majority face (``face`` ``(n,)``, -1: none)."""
     ok = pt.used & (face >= 0)
-    pairs, counts = np.unique(np.column_stack([pt.patch[ok], face[ok]]), axis=0, return_counts=True)
-    majority = np.full(len(pt.centre), -1, dtype=np.int64)
-    for k, f in pairs[np.argsort(counts, kind="stable")]:
-        majority[k] = f  # ascending counts: the last written is the largest
+    majority = majority_face(pt.patch[ok], face[ok], len(pt.centre))
     keep = ok & (face == majority[np.maximum(pt.patch, 0)])
     return _drop_small(replace(pt, patch=np.where(keep, pt.patch, -1)))
 
@@ -354,18 +352,12 @@ DESIGNS = (
 
 def case(name: str, distance_m: float, seed: int, size: int, voxel: float, iterations: int) -> dict[str, object]:
     """Error / bound and sigma / bound per parameter of each design on one seeded case."""
-    motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    noise = scene.scanner.noise
-    sim, data, mapping, surf = at_truth(motion, scene, seed)
-    T = float(sim.t_s.min())
-    b = bound_covariances(motion, scene, sim, T)
-    bound = bound_sigmas(b.x, b.facets)
-    x0 = mapping.x
+    tc = truth_case(name, distance_m, seed, size)
+    motion, scene, sim, data, mapping, surf = tc.motion, tc.scene, tc.sim, tc.data, tc.mapping, tc.surf
+    noise, x0 = scene.scanner.noise, mapping.x
 
     def over_bound(cov: FloatArray) -> list[float]:
-        sig = motion_sigmas_deg(x0, canonical_cov(x0, cov))
-        return [sig[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS]
+        return loss_choice_over_bound(x0, tc.bound, cov)
 
     dx = surfel_pairs_step(data, mapping, surf, noise)
     out: dict[str, object] = {"shape": name, "distance_m": distance_m, "seed": seed}
@@ -449,27 +441,13 @@ def _rms(cases: list[dict[str, object]], key: str, label: str, distance: float |
 
 
 def _plot(summary: dict[str, dict[str, dict[str, float]]], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
     shapes = list(summary)
-    width = 0.8 / len(DESIGNS)
-    for i, label in enumerate(DESIGNS):
-        at = np.arange(len(shapes)) + (i - (len(DESIGNS) - 1) / 2) * width
-        ax.bar(at, [summary[s][label]["error_over_bound"] for s in shapes], width, label=label)
-        sig = [summary[s][label]["sigma_over_bound"] for s in shapes]
-        ax.plot(at, sig, "k_", ms=12)
-    ax.axhline(1.0, color="k", lw=0.8, ls=":")
-    ax.set_xticks(np.arange(len(shapes)), shapes)
-    ax.set_ylabel("RMS error / dense bound (bars); design's sigma (ticks)")
-    ax.set_title("Per-hit residuals against planes of the map, at the truth (1 = efficient)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    title = "Per-hit residuals against planes of the map, at the truth (1 = efficient)"
+    with saved_figure(path, title=title, ylabel="RMS error / dense bound (bars); design's sigma (ticks)") as ax:
+        at = grouped_bars(ax, shapes, {k: [summary[s][k]["error_over_bound"] for s in shapes] for k in DESIGNS})
+        for label in DESIGNS:
+            ax.plot(at[label], [summary[s][label]["sigma_over_bound"] for s in shapes], "k_", ms=12)
+        ax.axhline(1.0, color="k", lw=0.8, ls=":")
 
 
 if __name__ == "__main__":
