@@ -138,18 +138,17 @@ def linearize_hits(
     return Linearized(mean(r), np.stack([mean(J[:, j]) for j in range(J.shape[1])], axis=1), var)
 
 
-def block_system(lin: Linearized) -> tuple[np.ndarray, np.ndarray, float]:
+def block_system(lin: Linearized) -> tuple[np.ndarray, np.ndarray]:
     """A block's Cauchy Newton system ``(H, g)`` (``loss_choice.newton_system``) weighed by its
-    own robust scale ``s`` (its variances taken as ``s^2 var``), and ``s``."""
+    own robust scale ``s`` (its variances taken as ``s^2 var``)."""
     e, s, Jn = normalised(lin)
     H, g = newton_system(e, s, Jn, cauchy(CAUCHY_C))
-    return H / s**2, g / s**2, s
+    return H / s**2, g / s**2
 
 
-def step(blocks: list[Linearized]) -> np.ndarray:
-    """The Cauchy cost's Newton step from the truth over the blocks, each at its own scale."""
-    systems = [block_system(b) for b in blocks]
-    return np.asarray(np.linalg.solve(sum(x[0] for x in systems), sum(x[1] for x in systems)))
+def step(*systems: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The Cauchy cost's Newton step from the truth over the blocks' systems (:func:`block_system`)."""
+    return np.asarray(np.linalg.solve(sum(H for H, _ in systems), sum(g for _, g in systems)))
 
 
 def clustered_cov(blocks: list[tuple[Linearized, np.ndarray]]) -> np.ndarray:
@@ -176,10 +175,11 @@ def case(
     hm, share = match_hits(data, mapping, surf, noise)
     groups = linearize_hits(data, mapping, surf, noise, hm)
     p, g = (pairs, pair_matches.src), (groups, hm.cell)
+    sys_p, sys_g = block_system(pairs), block_system(groups)
     out = {
-        "surfel pairs": over_bound(x, bound, step([pairs])),
-        "pairs + hit groups": over_bound(x, bound, step([pairs, groups])),
-        "hit groups alone": over_bound(x, bound, step([groups])),
+        "surfel pairs": over_bound(x, bound, step(sys_p)),
+        "pairs + hit groups": over_bound(x, bound, step(sys_p, sys_g)),
+        "hit groups alone": over_bound(x, bound, step(sys_g)),
         "sigma: pairs": over_bound(x, bound, clustered_cov([p])),
         "sigma: pairs + hit groups": over_bound(x, bound, clustered_cov([p, g])),
         "sigma: hit groups alone": over_bound(x, bound, clustered_cov([g])),
@@ -190,8 +190,9 @@ def case(
             hit_face = hit_face[data.kept]
         faces = (hit_face, majority_face(surf.point_cell, hit_face, len(surf.planar)))
         same = linearize_hits(data, mapping, surf, noise, match_hits(data, mapping, surf, noise, faces=faces)[0])
-        out["pairs + hit groups on the target's face"] = over_bound(x, bound, step([pairs, same]))
-        out["hit groups on the target's face alone"] = over_bound(x, bound, step([same]))
+        sys_same = block_system(same)
+        out["pairs + hit groups on the target's face"] = over_bound(x, bound, step(sys_p, sys_same))
+        out["hit groups on the target's face alone"] = over_bound(x, bound, step(sys_same))
     return out, float(np.mean(surf.planar[surf.point_cell])), share
 
 

@@ -67,8 +67,7 @@ from .dense_bound import (
     last_stage_matches,
     majority_face,
 )
-from .loss_choice import cauchy, newton_step, normalised, truth_case
-from .loss_choice import over_bound as loss_choice_over_bound
+from .loss_choice import cauchy, newton_step, normalised, over_bound, truth_case
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -354,14 +353,10 @@ def case(name: str, distance_m: float, seed: int, size: int, voxel: float, itera
     """Error / bound and sigma / bound per parameter of each design on one seeded case."""
     tc = truth_case(name, distance_m, seed, size)
     motion, scene, sim, data, mapping, surf = tc.motion, tc.scene, tc.sim, tc.data, tc.mapping, tc.surf
-    noise, x0 = scene.scanner.noise, mapping.x
-
-    def over_bound(cov: FloatArray) -> list[float]:
-        return loss_choice_over_bound(x0, tc.bound, cov)
-
+    noise, x0, bound = scene.scanner.noise, mapping.x, tc.bound
     dx = surfel_pairs_step(data, mapping, surf, noise)
     out: dict[str, object] = {"shape": name, "distance_m": distance_m, "seed": seed}
-    errors: dict[str, list[float]] = {"surfel pairs": over_bound(np.outer(dx, dx))}
+    errors: dict[str, list[float]] = {"surfel pairs": over_bound(x0, bound, dx)}
     sigmas: dict[str, list[float]] = {}
     used: dict[str, float] = {"surfel pairs": float(np.mean(surf.planar[surf.point_cell]))}
     xyz_T = mapping.apply(data.xyz_m, data.line)
@@ -380,8 +375,8 @@ def case(name: str, distance_m: float, seed: int, size: int, voxel: float, itera
     last: dict[str, float] = {}
     for label, (patches, corrected) in designs.items():
         x, H, scale, last[label] = PatchFit(data, noise, patches, corrected=corrected).optimum(x0, iterations)
-        errors[label] = over_bound(np.outer(x - x0, x - x0))
-        sigmas[label] = over_bound(np.asarray(np.linalg.inv(H), dtype=float) * scale**2)
+        errors[label] = over_bound(x0, bound, x - x0)
+        sigmas[label] = over_bound(x0, bound, np.asarray(np.linalg.inv(H), dtype=float) * scale**2)
         used[label] = float(np.mean(patches.used))
     out.update(errors=errors, sigmas=sigmas, used=used, last_step_over_sigma=last)
     return out
