@@ -1,7 +1,7 @@
 """The hits the surfels leave out, each matched to the nearest planar surfel of a partner frame.
 
     python -m bench.linescan.hit_pairs [--motions 5] [--shapes box long-array] [--distances 50 100]
-                                       [--oracle] [--no-handover] [--stem NAME]
+                                       [--oracle] [--no-handover] [--grazing COS] [--stem NAME]
     python -m bench.linescan.hit_pairs --report A.json B.json [--baseline C.json D.json]
 
 Measured at the true motion, as ``loss_choice.py`` measures the fit's loss: the fit's surfel
@@ -11,7 +11,9 @@ the nearest planar surfel ``a_t`` of ``b`` (within one surfel size at ``T``) and
 
     r = n_t . (M(x) - a_t),   |r| <= 3 sqrt(var_x + v_t / N_t),   in-plane offset <= 0.75 surfel
 
-with ``var_x`` the hit's sensor variance along ``n_t`` and the plane facing the hit's sensor.
+with ``var_x`` the hit's sensor variance along ``n_t`` and the plane facing the hit's sensor
+(with ``--grazing COS``, also seen at grazing incidence: ``|n_t . u| < COS``, ``u`` the sight;
+the fit's ``dense.grazing`` takes these, with ``COS`` = 0.3, off its thin members' hits).
 The hits of one cell matched to one target are one residual: their mean ``r`` and ``J``, and
 
     var = mean(var_x) / k + v_t / N_t + |mean in-plane offset|^2 v_nt
@@ -74,10 +76,12 @@ def match_hits(
     noise: SensorNoise,
     *,
     faces: tuple[np.ndarray, np.ndarray] | None = None,
+    max_cos: float | None = None,
 ) -> tuple[HitMatches, float]:
     """The left-out hits matched to partner frames' planar surfels (see the module), and the
     share of all hits matched. faces: each hit's face of the mesh and each surfel's majority
-    face; only hits on their target's face are matched (an oracle)."""
+    face; only hits on their target's face are matched (an oracle). max_cos: only hits whose
+    sight meets the target's plane with ``|cos(incidence)|`` below it (grazing hits)."""
     h_all = np.flatnonzero(~surf.planar[surf.point_cell])
     x_ref = mapping.apply(data.xyz_m[h_all], data.line[h_all])
     sensor_ref = mapping.apply(np.zeros((len(h_all), 3)), data.line[h_all])
@@ -100,6 +104,9 @@ def match_hits(
         facing = np.einsum("ni,ni->n", n, sensor_ref[sel] - x_ref[sel]) > 0
         beside = np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE * data.surfel_m) ** 2
         keep = facing & beside & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        if max_cos is not None:
+            sight = sensor_ref[sel] - x_ref[sel]
+            keep &= np.abs(np.einsum("ni,ni->n", n, sight)) < max_cos * np.linalg.norm(sight, axis=1)
         if faces is not None:
             keep &= (faces[0][h] >= 0) & (faces[0][h] == faces[1][t])
         hits.append(h[keep])
@@ -166,13 +173,13 @@ def clustered_cov(blocks: list[tuple[Linearized, np.ndarray]]) -> np.ndarray:
 
 
 def case(
-    name: str, distance_m: float, seed: int, size: int, *, oracle: bool
+    name: str, distance_m: float, seed: int, size: int, *, oracle: bool, max_cos: float | None = None
 ) -> tuple[dict[str, list[float]], float, float]:
     tc = truth_case(name, distance_m, seed, size)
     data, mapping, surf, noise = tc.data, tc.mapping, tc.surf, tc.scene.scanner.noise
     bound, x = tc.bound, mapping.x
     pair_matches, pairs = last_stage_matches(data, mapping, surf, noise)
-    hm, share = match_hits(data, mapping, surf, noise)
+    hm, share = match_hits(data, mapping, surf, noise, max_cos=max_cos)
     groups = linearize_hits(data, mapping, surf, noise, hm)
     p, g = (pairs, pair_matches.src), (groups, hm.cell)
     sys_p, sys_g = block_system(pairs), block_system(groups)
@@ -189,7 +196,8 @@ def case(
         if data.kept is not None:
             hit_face = hit_face[data.kept]
         faces = (hit_face, majority_face(surf.point_cell, hit_face, len(surf.planar)))
-        same = linearize_hits(data, mapping, surf, noise, match_hits(data, mapping, surf, noise, faces=faces)[0])
+        on_face = match_hits(data, mapping, surf, noise, faces=faces, max_cos=max_cos)[0]
+        same = linearize_hits(data, mapping, surf, noise, on_face)
         sys_same = block_system(same)
         out["pairs + hit groups on the target's face"] = over_bound(x, bound, step(sys_p, sys_same))
         out["hit groups on the target's face alone"] = over_bound(x, bound, step(sys_same))
@@ -225,7 +233,7 @@ def run_cases(args: argparse.Namespace) -> list[Case]:
     for name in args.shapes:
         for distance in args.distances:
             for seed in range(args.first_seed, args.first_seed + args.motions):
-                designs, planar, share = case(name, distance, seed, args.size, oracle=args.oracle)
+                designs, planar, share = case(name, distance, seed, args.size, oracle=args.oracle, max_cos=args.grazing)
                 cases.append(
                     {
                         "shape": name,
@@ -287,6 +295,9 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--stem", default="hit_pairs")
     parser.add_argument("--oracle", action="store_true", help="also the groups on their target's face of the mesh")
+    parser.add_argument(
+        "--grazing", type=float, default=None, metavar="COS", help="only hits seen with |cos(incidence)| below COS"
+    )
     parser.add_argument(
         "--no-handover", action="store_true", help="the surfels built without handing points across edges"
     )

@@ -2,7 +2,7 @@
 
     python -m bench.linescan.real_shapes [--motions 10] [--distances 50 100] [--size 512]
                                           [--shapes box telescope ... hubble] [--stem NAME]
-                                          [--first-seed 0] [--no-beams]
+                                          [--first-seed 0] [--no-beams] [--no-grazing]
     python -m bench.linescan.real_shapes --report bench/out/A.json bench/out/B.json [--rebound]
 
 Each case: a seeded motion on the paper's grid, 15 frames (Table 1 scanner and noise) of the
@@ -343,6 +343,7 @@ def main() -> None:
     parser.add_argument("--motions", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + motions - 1")
     parser.add_argument("--no-beams", action="store_true", help="without thin members as lines (DenseConfig.beams)")
+    parser.add_argument("--no-grazing", action="store_true", help="without the grazing hits (DenseConfig.grazing)")
     parser.add_argument("--distances", type=float, nargs="+", default=[50.0, 100.0])
     parser.add_argument("--size", type=int, default=512, help="lines and pixels per frame")
     parser.add_argument("--shapes", nargs="+", default=["box", *PARAMETRIC, "hubble"])
@@ -355,7 +356,8 @@ def main() -> None:
         report([rebound(c, args.size) for c in saved] if args.rebound else saved, args.stem)
         return
     args.shapes = start_run(args.shapes)
-    options = FramesOptions(dense=DenseConfig(beams=False)) if args.no_beams else None
+    dense = DenseConfig(beams=not args.no_beams, grazing=not args.no_grazing)
+    options = FramesOptions(dense=dense) if dense != DenseConfig() else None
     cases: list[Case] = []
     for name in args.shapes:
         for distance in args.distances:

@@ -37,6 +37,11 @@ class DenseConfig(BaseModel):
     beams: bool = Field(
         True, description="fit thin members (booms, truss wires) as lines too, from the second stage on"
     )
+    grazing: bool = Field(
+        True,
+        description="in the last stage, match the hits seen at grazing incidence that no planar surfel holds "
+        "against the other frames' planar surfels",
+    )
 
 
 class CommonOptions(BaseModel):

@@ -68,7 +68,7 @@ def match(
 
 @dataclass(frozen=True)
 class Linearized:
-    r: FloatArray  # centroid-to-plane residuals (m), then any thin members' offsets (refine.py)
+    r: FloatArray  # centroid-to-plane residuals (m), then any members' and grazing groups' (terms.py)
     J: FloatArray  # their derivatives w.r.t. the free parameters
     var: FloatArray  # model variance of each residual (m^2), before the common scale
 

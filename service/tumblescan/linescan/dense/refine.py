@@ -20,7 +20,10 @@ have moved and the surfels rebuilt after large steps.
 
 Correspondences and the residual model: :mod:`.matching`. Thin members (booms, truss wires)
 that make no planar surfel join from the second stage on, each hit's offset across its
-member's line (:mod:`.beams`); their rows follow the surfels' in the cost and the covariance.
+member's line (:mod:`.beams`); in the last stage, the hits seen at grazing incidence that no
+planar surfel holds, against the other frames' planar surfels (:mod:`.grazing`). Their rows
+follow the surfels' in the cost and the covariance (:mod:`.terms`): the members' variances from
+their own spread, the grazing groups' scaled to the surfel pairs' robust scale.
 
 Three stages: every surfel matched in a neighbouring frame (right correspondences even from
 the initializer's rough start), then in random frames (the long time baselines fix the
@@ -34,7 +37,7 @@ and the surface model's misfit), by the cluster jackknife (see :mod:`.covariance
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -44,7 +47,7 @@ from ...target.motion import N_PARAMS, canonical_params
 from ..options import DenseConfig
 from ..sensor import SensorNoise
 from ..validation import canonical_cov
-from .beams import Beams, beam_rows, find_beams
+from .beams import Beams, find_beams
 from .covariance import patches, sandwich
 from .damping import LM_START, damped_step
 from .data import DenseData
@@ -52,17 +55,15 @@ from .mapping import LineMapping
 from .matching import (
     CAUCHY_C,
     Linearized,
-    Matches,
     cauchy_cost,
-    linearize,
     match,
     partners,
-    residuals,
     robust_sigma,
     weights,
 )
 from .step_coords import StepCoords
 from .surfels import Surfels, build_surfels
+from .terms import Terms
 
 ALL_FREE = tuple(range(N_PARAMS))
 SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
@@ -80,9 +81,9 @@ class DenseFit:
 
     rms_m: RMS centroid-to-plane residual of the inliers; frame_rms_m: the same per frame (as
     source or target); residuals: centroid-to-plane residuals used; surfels: distinct source
-    surfels; points: the points in them and on the members; scale: the common scale ``s`` of the
-    centroid-to-plane residuals' model sigmas (about 1 when the motion fits; a wrong motion leaves
-    residuals many times their model sigma).
+    surfels; points: the points in them, on the members and in the grazing groups; scale: the
+    common scale ``s`` of the centroid-to-plane residuals' model sigmas (about 1 when the motion
+    fits; a wrong motion leaves residuals many times their model sigma).
     """
 
     x: FloatArray
@@ -100,42 +101,6 @@ class DenseFit:
     @property
     def spin_only(self) -> bool:
         return self.free == SPIN_ONLY_FREE
-
-
-@dataclass(frozen=True)
-class _Terms:
-    """What the residuals are made of: the surfels, their correspondences and the thin members."""
-
-    surf: Surfels
-    matches: Matches
-    beams: Beams
-
-    def linearize(self, problem: _Problem, mapping: LineMapping) -> Linearized:
-        """The surfels' residuals (:func:`.matching.linearize`), then the members' (:func:`.beams.beam_rows`)."""
-        lin = linearize(problem.data, mapping, self.surf, self.matches, problem.noise)
-        if self.beams.members == 0:
-            return lin
-        r, J, _ = beam_rows(self.beams, problem.data, mapping)
-        assert J is not None
-        return Linearized(
-            np.concatenate([lin.r, r]), np.vstack([lin.J, J]), np.concatenate([lin.var, self.beams.row_var_m2])
-        )
-
-    def residuals(self, problem: _Problem, mapping: LineMapping) -> FloatArray:
-        """The residuals alone, in the order of :meth:`linearize`."""
-        r = residuals(mapping, self.surf, self.matches)[0]
-        if self.beams.members == 0:
-            return r
-        return np.concatenate([r, beam_rows(self.beams, problem.data, mapping, jacobian=False)[0]])
-
-    def positions(self, problem: _Problem, mapping: LineMapping) -> FloatArray:
-        """Where each residual's source lies at ``T`` (its patch, for the covariance)."""
-        m, surf = self.matches, self.surf
-        anchors = mapping.apply(surf.anchor_obs[m.src], surf.line[m.src])
-        if self.beams.members == 0:
-            return anchors
-        hits = mapping.apply(problem.data.xyz_m[self.beams.point], problem.data.line[self.beams.point])
-        return np.vstack([anchors, hits, hits])  # a row across, then one along the sight, per hit
 
 
 @dataclass
@@ -207,11 +172,15 @@ def refine_dense(
     # Thin members join from the second stage on: at T their strips line up only once the
     # frames roughly agree.
     with_beams = [False, cfg.beams, cfg.beams]
+    # The grazing hits join in the last stage: they are gated at 3 of their own sigmas, which
+    # only a converged motion keeps.
+    with_grazing = [False, False, cfg.grazing]
     if converged:
-        stages, gate, with_beams = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m), with_beams[2:]
+        stages, gate = stages[2:], max(5 * sensor.range_sigma_m, 1.5 * data.surfel_m)
+        with_beams, with_grazing = with_beams[2:], with_grazing[2:]
     total = sum(iterations for _, iterations in stages)
-    terms: _Terms | None = None
-    for ((src, partner), iterations), beams_on in zip(stages, with_beams, strict=True):
+    terms: Terms | None = None
+    for ((src, partner), iterations), beams_on, grazing_on in zip(stages, with_beams, with_grazing, strict=True):
         z, terms, gate, step = _iterate(
             problem,
             z,
@@ -221,6 +190,7 @@ def refine_dense(
             gate,
             iterations,
             beams_on,
+            grazing_on,
             step=step,
             total=total,
             on_iteration=on_iteration,
@@ -234,15 +204,16 @@ def _iterate(
     z: FloatArray,
     src: IntArray,
     partner: IntArray,
-    terms: _Terms | None,
+    terms: Terms | None,
     gate: float,
     iterations: int,
     beams_on: bool,
+    grazing_on: bool,
     *,
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
-) -> tuple[FloatArray, _Terms, float, int]:
+) -> tuple[FloatArray, Terms, float, int]:
     """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
     distance to a matched surfel's centroid, tightened as the frames come together."""
     cfg, data, noise = problem.config, problem.data, problem.noise
@@ -259,12 +230,14 @@ def _iterate(
         surf = terms.surf
     # A stage's start is a new motion: the members (their hits and variances) are found anew.
     beams = found_beams(surf, mapping)
-    terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+    terms = Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+    if grazing_on:
+        terms = terms.with_grazing(problem.data, problem.noise, mapping)
     matched_at, matched_gate = mapping, gate
     lam = LM_START
     vectors = StepCoords(problem.free)
     for _ in range(iterations):
-        lin = terms.linearize(problem, mapping)
+        lin = terms.linearize(problem.data, problem.noise, mapping)
         w, scale = weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
@@ -302,7 +275,16 @@ def _iterate(
             or gate < 0.9 * matched_gate
             or _shift(data, probe, matched_at, mapping) > REMATCH * data.surfel_m
         ):
-            terms = _Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+            rematched = Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
+            if not grazing_on:
+                terms = rematched
+            elif surf is terms.surf:
+                # The groups' targets (and the members they keep off) are still these: only the
+                # pairs are found anew. Finding the groups costs a query per grazing hit and
+                # frame; within the last stage the points move by less than a quarter surfel.
+                terms = replace(rematched, grazing=terms.grazing, grazing_scale2=terms.grazing_scale2)
+            else:
+                terms = rematched.with_grazing(problem.data, problem.noise, mapping)
             matched_at, matched_gate = mapping, gate
 
     return z, terms, gate, step
@@ -316,11 +298,11 @@ def _damped_step(
     lam: float,
     lin: Linearized,
     scale: float,
-    terms: _Terms,
+    terms: Terms,
     coords: StepCoords | None,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """The Levenberg-Marquardt step (:func:`.damping.damped_step`) that lowers the Cauchy cost on
-    these correspondences and members, as ``(dz, next damping, mapping)``; None when none does.
+    these correspondences, members and grazing groups, as ``(dz, next damping, mapping)``; None when none does.
     ``H`` and ``g`` are in the step coordinates ``coords`` (in ``z`` itself when None); the step
     returned is in ``z``."""
     data = problem.data
@@ -329,7 +311,8 @@ def _damped_step(
         moved = z + y if coords is None else coords.z_of(coords.y_of(z) + y)
         x = _on_gauge(problem, problem.full(moved))
         mapping = LineMapping(x, data.tau_s, problem.free)
-        return cauchy_cost(terms.residuals(problem, mapping) / np.sqrt(lin.var), scale), (x, mapping)
+        r = terms.residuals(data, problem.noise, mapping)
+        return cauchy_cost(r / np.sqrt(lin.var), scale), (x, mapping)
 
     taken = damped_step(H, g, lam, cauchy_cost(lin.r / np.sqrt(lin.var), scale), trial)
     if taken is None:
@@ -369,13 +352,13 @@ def _on_gauge(problem: _Problem, x: FloatArray) -> FloatArray:
     return out
 
 
-def _finish(problem: _Problem, z: FloatArray, terms: _Terms, steps: int) -> DenseFit:
+def _finish(problem: _Problem, z: FloatArray, terms: Terms, steps: int) -> DenseFit:
     """Covariance and residual statistics at ``z`` with the last step's correspondences."""
     data = problem.data
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
-    lin = terms.linearize(problem, mapping)
-    cluster = patches(terms.positions(problem, mapping), CLUSTER_FRACTION * data.extent_m)
+    lin = terms.linearize(problem.data, problem.noise, mapping)
+    cluster = patches(terms.positions(problem.data, mapping), CLUSTER_FRACTION * data.extent_m)
     # The covariance with the scale the fit weighed every row by; the fit's statistics from the
     # centroid-to-plane residuals alone (the members' offsets are scaled by their own spread).
     cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * weights(lin)[1], cluster, _gauge_row(problem, x))
@@ -403,7 +386,7 @@ def _finish(problem: _Problem, z: FloatArray, terms: _Terms, steps: int) -> Dens
         frame_rms_m=frame_rms,
         residuals=n,
         surfels=len(sources),
-        points=int(surf.count[sources].sum()) + len(terms.beams.point),
+        points=int(surf.count[sources].sum()) + len(terms.beams.point) + terms.grazing.hits,
         iterations=steps,
         scale=scale,
         members=terms.beams.members,

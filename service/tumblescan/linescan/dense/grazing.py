@@ -1,0 +1,162 @@
+"""Hits seen at grazing incidence that no planar surfel holds, against the other frames' surfels.
+
+At grazing incidence a face's cells run far along the sight: neighbouring cells lie a cell's
+width times ``tan(incidence)`` apart in range, and the view's interior test takes them for an
+occlusion border, so their hits stay out of the planar surfels. Yet such a hit's noise along
+the face's normal is the angle noise (``s_a rho``, 0.9 cm at 50 m), not the range noise (2 cm),
+and they lie on the far edges of faces, where a turn moves them most: beside the hits the
+surfels use they held a third to nine tenths of what the left-out hits could add to the
+bound (``bench/linescan/line_potential.py``).
+
+Each hit ``x`` of frame ``f`` outside every planar surfel (and off every thin member) is matched,
+in every other frame ``b``, to the nearest planar surfel ``a_t`` of ``b`` within one surfel size
+at ``T``, and kept when the sight meets that plane at grazing incidence and
+
+    r = n_t . (M(x) - a_t),   |r| <= 3 sqrt(var_x + v_t / N_t),   in-plane offset <= 0.75 surfel
+
+with ``var_x`` the hit's sensor variance along ``n_t`` (:func:`.surfels.normal_variance`) and the
+plane facing the hit's sensor (only hits whose own cell looks grazing are tried:
+``CELL_MAX_COS``). The hits of one cell matched to one target are one residual, a pseudo-surfel
+at their mean ``g`` (attached, as a surfel is, to the line of their mean time):
+
+    r = n_t . (M(g) - a_t),   var = var_g / k + v_t / N_t + d^2 v_nt
+
+with ``var_g`` the sensor variance along ``n_t`` at ``g``, ``k`` its hits and ``d`` its in-plane
+offset from the target. Only grazing hits: the other
+left-out hits, matched so, sit 1.3-2.6 of their own sigmas off the truth (edges, and the build's
+hand-over, which leaves out the points on the far side of a face); the grazing ones 0.8-1.8, and
+beside the pairs they lowered the error on five shapes of six (``bench/linescan/hit_pairs.py
+--grazing 0.3``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..._typing import FloatArray, IntArray
+from ..sensor import SensorNoise
+from .data import DenseData, cell_lines
+from .mapping import LineMapping
+from .surfels import Surfels, normal_variance
+
+# Grazing: the sight meets the target's plane with |cos(incidence)| below this (73 deg).
+MAX_COS_INCIDENCE = 0.3
+# Only the hits whose own cell's normal is at least this grazing are matched at all (the cell's
+# normal is noisier than the target's; at the truth, on the box and Hubble at 50 m seed 0, this
+# kept 98 % of the hits matched without it and halved the search: a script, not kept).
+CELL_MAX_COS = 0.5
+MAX_INPLANE_SURFELS = 0.75
+GATE_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class Grazing:
+    """The groups (one per source cell and target surfel): their hits' mean in the sensor frame
+    at the line of their mean time ``(g, 3)``, that line ``(g,)``, their hit count ``(g,)``, target
+    planar surfel ``(g,)`` and source cell ``(g,)``; and the distinct hits they hold (indices into
+    the data's points)."""
+
+    xyz_obs: FloatArray
+    line: IntArray
+    count: FloatArray
+    target: IntArray
+    cell: IntArray
+    hit: IntArray
+
+    @property
+    def groups(self) -> int:
+        return len(self.target)
+
+    @property
+    def hits(self) -> int:
+        return len(self.hit)
+
+    @staticmethod
+    def none() -> Grazing:
+        empty = np.zeros(0, dtype=np.int64)
+        return Grazing(np.zeros((0, 3)), empty, np.zeros(0), empty, empty, empty)
+
+
+def find_grazing(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, *, exclude: IntArray | None = None
+) -> Grazing:
+    """The grazing groups at ``mapping`` (see the module). exclude: hits to leave out (the thin
+    members' own)."""
+    free = ~surf.planar[surf.point_cell]
+    if exclude is not None:
+        free[exclude] = False
+    # Only hits whose own cell is seen at grazing incidence: the search over every other frame
+    # costs a query per hit and frame.
+    u = data.xyz_m / np.maximum(np.linalg.norm(data.xyz_m, axis=1), 1e-300)[:, None]
+    own_cos = np.abs(np.einsum("ni,ni->n", u, surf.normal_obs[data.cell]))
+    h_all = np.flatnonzero(free & (own_cos < CELL_MAX_COS))
+    if len(h_all) == 0 or not np.any(surf.planar):
+        return Grazing.none()
+    x_ref = mapping.apply(data.xyz_m[h_all], data.line[h_all])
+    sensor_ref = mapping.apply(np.zeros((len(h_all), 3)), data.line[h_all])
+    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    hits, targets = [], []
+    for b in range(data.n_frames):
+        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        sel = np.flatnonzero(data.frame[h_all] != b)
+        if len(in_b) == 0 or len(sel) == 0:
+            continue
+        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
+        ok = np.isfinite(dist)
+        sel, t = sel[ok], in_b[nn[ok]]
+        n = normal_ref[t]
+        d = x_ref[sel] - anchor_ref[t]
+        r = np.einsum("ni,ni->n", n, d)
+        sight = sensor_ref[sel] - x_ref[sel]
+        cos = np.einsum("ni,ni->n", n, sight) / np.maximum(np.linalg.norm(sight, axis=1), 1e-300)
+        h = h_all[sel]
+        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+        keep = (
+            (cos > 0)  # the plane faces the hit's sensor
+            & (cos < MAX_COS_INCIDENCE)
+            & (np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE_SURFELS * data.surfel_m) ** 2)
+            & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        )
+        hits.append(h[keep])
+        targets.append(t[keep])
+    if not hits:
+        return Grazing.none()
+    hit, target = np.concatenate(hits), np.concatenate(targets)
+    if len(hit) == 0:
+        return Grazing.none()
+    # One group per source cell and target: its hits' mean at T, attached to their mean line.
+    _, first, group = np.unique(data.cell[hit] * len(surf.planar) + target, return_index=True, return_inverse=True)
+    g = len(first)
+    count, line = cell_lines(data.tau_s, data.line[hit], group, g)
+    mapped = mapping.apply(data.xyz_m[hit], data.line[hit])
+    mean_T = np.stack([np.bincount(group, mapped[:, i], minlength=g) for i in range(3)], axis=1) / count[:, None]
+    xyz_obs = mapping.center + np.einsum("nji,nj->ni", mapping.Rt[line], mean_T - mapping.center)
+    return Grazing(xyz_obs, line, count, target[first], data.cell[hit[first]], np.unique(hit))
+
+
+def grazing_rows(
+    groups: Grazing, surf: Surfels, mapping: LineMapping, noise: SensorNoise, *, jacobian: bool = True
+) -> tuple[FloatArray, FloatArray | None, FloatArray]:
+    """The groups' residuals ``r`` ``(g,)`` (m), their derivatives w.r.t. the free parameters
+    ``(g, k)`` (None unless ``jacobian``) and model variances ``(g,)`` (m², before the common
+    scale), at ``mapping`` (see the module)."""
+    t = groups.target
+    n = mapping.rotate(surf.normal_obs[t], surf.line[t])
+    d = mapping.apply(groups.xyz_obs, groups.line) - mapping.apply(surf.anchor_obs[t], surf.line[t])
+    r = np.einsum("ni,ni->n", n, d)
+    n_obs = np.einsum("nji,nj->ni", mapping.Rt[groups.line], n)
+    var = (
+        normal_variance(noise, groups.xyz_obs, n_obs) / groups.count
+        + surf.var_m2[t] / surf.count[t]
+        + (np.einsum("ni,ni->n", d, d) - r**2) * surf.normal_var_rad2[t]
+    )
+    if not jacobian:
+        return np.asarray(r), None, np.asarray(var)
+    J = mapping.normal_derivative(n, groups.xyz_obs, groups.line) - mapping.normal_derivative(
+        n, surf.anchor_obs[t], surf.line[t]
+    )
+    return np.asarray(r), np.asarray(J), np.asarray(var)
