@@ -40,11 +40,11 @@ from pathlib import Path
 from typing import TypedDict
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tumblescan.linescan.dense import surfels
 from tumblescan.linescan.dense.covariance import sandwich
 from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.grazing import match_to_surfels
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
@@ -53,9 +53,6 @@ from tumblescan.linescan.sensor import SensorNoise
 from ..common import grouped_bars, machine, out_dir, saved_figure, table
 from .dense_bound import face_of_hits, last_stage_matches, majority_face
 from .loss_choice import cauchy, newton_system, normalised, over_bound, truth_case
-
-MAX_INPLANE = 0.75  # surfel sizes
-GATE_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -82,36 +79,12 @@ def match_hits(
     share of all hits matched. faces: each hit's face of the mesh and each surfel's majority
     face; only hits on their target's face are matched (an oracle). max_cos: only hits whose
     sight meets the target's plane with ``|cos(incidence)|`` below it (grazing hits)."""
-    h_all = np.flatnonzero(~surf.planar[surf.point_cell])
-    x_ref = mapping.apply(data.xyz_m[h_all], data.line[h_all])
-    sensor_ref = mapping.apply(np.zeros((len(h_all), 3)), data.line[h_all])
-    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
-    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
-    hits, targets = [], []
-    for b in range(data.n_frames):
-        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        sel = np.flatnonzero(data.frame[h_all] != b)
-        if len(in_b) == 0 or len(sel) == 0:
-            continue
-        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m)
-        ok = np.isfinite(dist)
-        sel, t = sel[ok], in_b[nn[ok]]
-        n = normal_ref[t]
-        d = x_ref[sel] - anchor_ref[t]
-        r = np.einsum("ni,ni->n", n, d)
-        h = h_all[sel]
-        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
-        facing = np.einsum("ni,ni->n", n, sensor_ref[sel] - x_ref[sel]) > 0
-        beside = np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE * data.surfel_m) ** 2
-        keep = facing & beside & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
-        if max_cos is not None:
-            sight = sensor_ref[sel] - x_ref[sel]
-            keep &= np.abs(np.einsum("ni,ni->n", n, sight)) < max_cos * np.linalg.norm(sight, axis=1)
-        if faces is not None:
-            keep &= (faces[0][h] >= 0) & (faces[0][h] == faces[1][t])
-        hits.append(h[keep])
-        targets.append(t[keep])
-    hit, target = np.concatenate(hits), np.concatenate(targets)
+    hit, target = match_to_surfels(
+        data, mapping, surf, noise, np.flatnonzero(~surf.planar[surf.point_cell]), max_cos=max_cos
+    )
+    if faces is not None:
+        on_face = (faces[0][hit] >= 0) & (faces[0][hit] == faces[1][target])
+        hit, target = hit[on_face], target[on_face]
     _, first, group = np.unique(data.cell[hit] * len(surf.planar) + target, return_index=True, return_inverse=True)
     share = len(np.unique(hit)) / len(data.xyz_m)
     return HitMatches(hit, target, group, data.cell[hit[first]]), share

@@ -95,37 +95,7 @@ def find_grazing(
     h_all = np.flatnonzero(free & (own_cos < CELL_MAX_COS))
     if len(h_all) == 0 or not np.any(surf.planar):
         return Grazing.none()
-    x_ref = mapping.apply(data.xyz_m[h_all], data.line[h_all])
-    sensor_ref = mapping.apply(np.zeros((len(h_all), 3)), data.line[h_all])
-    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
-    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
-    hits, targets = [], []
-    for b in range(data.n_frames):
-        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        sel = np.flatnonzero(data.frame[h_all] != b)
-        if len(in_b) == 0 or len(sel) == 0:
-            continue
-        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
-        ok = np.isfinite(dist)
-        sel, t = sel[ok], in_b[nn[ok]]
-        n = normal_ref[t]
-        d = x_ref[sel] - anchor_ref[t]
-        r = np.einsum("ni,ni->n", n, d)
-        sight = sensor_ref[sel] - x_ref[sel]
-        cos = np.einsum("ni,ni->n", n, sight) / np.maximum(np.linalg.norm(sight, axis=1), 1e-300)
-        h = h_all[sel]
-        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
-        keep = (
-            (cos > 0)  # the plane faces the hit's sensor
-            & (cos < MAX_COS_INCIDENCE)
-            & (np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE_SURFELS * data.surfel_m) ** 2)
-            & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
-        )
-        hits.append(h[keep])
-        targets.append(t[keep])
-    if not hits:
-        return Grazing.none()
-    hit, target = np.concatenate(hits), np.concatenate(targets)
+    hit, target = match_to_surfels(data, mapping, surf, noise, h_all, max_cos=MAX_COS_INCIDENCE)
     if len(hit) == 0:
         return Grazing.none()
     # One group per source cell and target: its hits' mean at T, attached to their mean line.
@@ -136,6 +106,52 @@ def find_grazing(
     mean_T = np.stack([np.bincount(group, mapped[:, i], minlength=g) for i in range(3)], axis=1) / count[:, None]
     xyz_obs = mapping.center + np.einsum("nji,nj->ni", mapping.Rt[line], mean_T - mapping.center)
     return Grazing(xyz_obs, line, count, target[first], data.cell[hit[first]], np.unique(hit))
+
+
+def match_to_surfels(
+    data: DenseData,
+    mapping: LineMapping,
+    surf: Surfels,
+    noise: SensorNoise,
+    hits: IntArray,
+    *,
+    max_cos: float | None = MAX_COS_INCIDENCE,
+) -> tuple[IntArray, IntArray]:
+    """Each of ``hits`` (indices into the data's points) matched, in every other frame, to the
+    nearest planar surfel within a surfel size at ``T``, kept when that plane faces the hit's
+    sensor (with ``|cos(incidence)|`` under ``max_cos``; None: at any incidence), the hit lies
+    within ``MAX_INPLANE_SURFELS`` of its anchor along the plane and within ``GATE_SIGMAS`` of it
+    across: ``(k,)`` hits and ``(k,)`` their target surfels, a hit once per frame it matched in."""
+    x_ref = mapping.apply(data.xyz_m[hits], data.line[hits])
+    sensor_ref = mapping.apply(np.zeros((len(hits), 3)), data.line[hits])
+    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    for b in range(data.n_frames):
+        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        sel = np.flatnonzero(data.frame[hits] != b)
+        if len(in_b) == 0 or len(sel) == 0:
+            continue
+        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
+        ok = np.isfinite(dist)
+        sel, t = sel[ok], in_b[nn[ok]]
+        n = normal_ref[t]
+        d = x_ref[sel] - anchor_ref[t]
+        r = np.einsum("ni,ni->n", n, d)
+        sight = sensor_ref[sel] - x_ref[sel]
+        cos = np.einsum("ni,ni->n", n, sight) / np.maximum(np.linalg.norm(sight, axis=1), 1e-300)
+        h = hits[sel]
+        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+        keep = (
+            (cos > 0)
+            & (np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE_SURFELS * data.surfel_m) ** 2)
+            & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        )
+        if max_cos is not None:
+            keep &= cos < max_cos
+        found.append(h[keep])
+        targets.append(t[keep])
+    return np.concatenate(found), np.concatenate(targets)
 
 
 def grazing_rows(
