@@ -52,6 +52,9 @@ def test_on_noise_free_frames_the_groups_lie_on_their_targets_planes_at_grazing_
     assert np.all(surf.planar[groups.target])
     assert np.all(data.cell_frame[groups.target] != data.cell_frame[groups.cell])
     assert not np.any(surf.planar[surf.point_cell[groups.hit]])
+    # ... and in a cell the build handed none of to a planar neighbour: a whole cell's hits.
+    handed = np.unique(data.cell[surf.point_cell != data.cell])
+    assert len(handed) > 0 and not np.any(np.isin(data.cell[groups.hit], handed))
     r, J, var = grazing_rows(groups, surf, mapping, noise)
     assert J is not None and np.all(var > 0)
     # The box's faces are exact planes: the groups lie on their targets' planes within what the
