@@ -99,9 +99,10 @@ def find_grazing(
         free[exclude] = False
     # Only hits whose own cell is seen at grazing incidence: the search over every other frame
     # costs a query per hit and frame.
-    u = data.xyz_m / np.maximum(np.linalg.norm(data.xyz_m, axis=1), 1e-300)[:, None]
-    own_cos = np.abs(np.einsum("ni,ni->n", u, surf.normal_obs[data.cell]))
-    h_all = np.flatnonzero(free & (own_cos < CELL_MAX_COS))
+    h_free = np.flatnonzero(free)
+    xyz = data.xyz_m[h_free]
+    own_cos = np.abs(np.einsum("ni,ni->n", xyz, surf.normal_obs[data.cell[h_free]]))
+    h_all = h_free[own_cos < CELL_MAX_COS * np.linalg.norm(xyz, axis=1)]
     if len(h_all) == 0 or not np.any(surf.planar):
         return Grazing.none()
     hit, target = match_to_surfels(data, mapping, surf, noise, h_all, max_cos=MAX_COS_INCIDENCE)

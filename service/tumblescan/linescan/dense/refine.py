@@ -232,12 +232,12 @@ def _iterate(
     beams = found_beams(surf, mapping)
     terms = Terms(surf, match(data, mapping, surf, src, partner, gate), beams)
     if grazing_on:
-        terms = terms.with_grazing(problem.data, problem.noise, mapping)
+        terms = terms.with_grazing(data, noise, mapping)
     matched_at, matched_gate = mapping, gate
     lam = LM_START
     vectors = StepCoords(problem.free)
     for _ in range(iterations):
-        lin = terms.linearize(problem.data, problem.noise, mapping)
+        lin = terms.linearize(data, noise, mapping)
         w, scale = weights(lin)
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
@@ -284,7 +284,7 @@ def _iterate(
                 # frame; within the last stage the points move by less than a quarter surfel.
                 terms = replace(rematched, grazing=terms.grazing, grazing_scale2=terms.grazing_scale2)
             else:
-                terms = rematched.with_grazing(problem.data, problem.noise, mapping)
+                terms = rematched.with_grazing(data, noise, mapping)
             matched_at, matched_gate = mapping, gate
 
     return z, terms, gate, step
@@ -302,9 +302,9 @@ def _damped_step(
     coords: StepCoords | None,
 ) -> tuple[FloatArray, float, LineMapping] | None:
     """The Levenberg-Marquardt step (:func:`.damping.damped_step`) that lowers the Cauchy cost on
-    these correspondences, members and grazing groups, as ``(dz, next damping, mapping)``; None when none does.
-    ``H`` and ``g`` are in the step coordinates ``coords`` (in ``z`` itself when None); the step
-    returned is in ``z``."""
+    these correspondences, members and grazing groups, as ``(dz, next damping, mapping)``; None
+    when none does. ``H`` and ``g`` are in the step coordinates ``coords`` (in ``z`` itself when
+    None); the step returned is in ``z``."""
     data = problem.data
 
     def trial(y: FloatArray) -> tuple[float, tuple[FloatArray, LineMapping]]:
@@ -357,8 +357,8 @@ def _finish(problem: _Problem, z: FloatArray, terms: Terms, steps: int) -> Dense
     data = problem.data
     x = problem.full(z)
     mapping = LineMapping(x, data.tau_s, problem.free)
-    lin = terms.linearize(problem.data, problem.noise, mapping)
-    cluster = patches(terms.positions(problem.data, mapping), CLUSTER_FRACTION * data.extent_m)
+    lin = terms.linearize(data, problem.noise, mapping)
+    cluster = patches(terms.positions(data, mapping), CLUSTER_FRACTION * data.extent_m)
     # The covariance with the scale the fit weighed every row by; the fit's statistics from the
     # centroid-to-plane residuals alone (the members' offsets are scaled by their own spread).
     cov_free = sandwich(lin.J, lin.r, lin.var, CAUCHY_C * weights(lin)[1], cluster, _gauge_row(problem, x))
