@@ -93,7 +93,7 @@ def true_tube_normals(motion: Motion, scene: Scene, mapping: LineMapping, surf: 
     return replace(surf, normal_obs=np.where(tube[:, None], n_obs, surf.normal_obs))
 
 
-def _surfels(
+def variant_surfels(
     variant: str, motion: Motion, scene: Scene, noise_seed: int
 ) -> tuple[Any, DenseData, LineMapping, Surfels]:
     """The frames at the truth and their surfels, as the estimator builds them or with ``variant``."""
@@ -130,7 +130,7 @@ def steps(
     scene = Scene(scanner=Scanner(lines=512, pixels=512), shape=shape_named(name))
     totals, per_patch = [], []
     for draw in range(draws):
-        sim, data, mapping, surf = _surfels(variant, motion, scene, seed + 1000 * draw)
+        sim, data, mapping, surf = variant_surfels(variant, motion, scene, seed + 1000 * draw)
         if draw == 0:
             bound = dense_bound(motion, scene, sim, float(sim.t_s.min()))
         mt, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
