@@ -33,6 +33,9 @@ def test_surfel_roles_on_the_box() -> None:
     took = np.zeros(len(surf.planar), dtype=bool)
     took[pc[pc != data.cell]] = True
     assert np.array_equal(roles.receiver, took) and 0 < took.sum() < roles.pure.sum()
+    # The hand-over gives only to planar surfels, and only the cells that are not planar give.
+    gave = np.unique(data.cell[pc != data.cell])
+    assert np.all(surf.planar[roles.receiver]) and not np.any(surf.planar[gave])
     # Some planar surfels lie beside an edge or the outline: not every pair is interior.
     matches, _ = last_stage_matches(data, mapping, surf, scene.scanner.noise)
     rows = subset_rows(roles, matches)
