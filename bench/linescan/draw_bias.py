@@ -20,7 +20,7 @@ The pairs are read whole and by subset, each subset a Newton step of its own:
 - ``interior``: both surfels pure and their 8 view neighbours too, on the same face (away from
   every edge and outline);
 - ``no receivers``: neither surfel took points from a cell across an edge
-  (``faces.assign_to_faces``).
+  (``handover.assign_to_faces``).
 
 ``--variant``: the surfels built as ``bias_map.py``'s variant of that name (``no-handover``: every
 point kept in its own cell).

@@ -8,7 +8,7 @@ sensor's sigma along that normal, ``z``. Every hit's noise is zero-mean, so the 
 set of hits chosen without regard to the noise is zero within ``1 / sqrt(n)``; a set chosen by
 the noise is not. The sets: the hits of the planar cells and of the others (cut by measured
 direction), the hits the build hands from a cell that is not planar to a planar neighbour
-(:func:`~tumblescan.linescan.dense.faces.assign_to_faces`), all hits in planar surfels, and the
+(:func:`~tumblescan.linescan.dense.handover.assign_to_faces`), all hits in planar surfels, and the
 hits left out of them. Then each planar surfel against its majority face: its anchor's offset
 along the true normal (mean and RMS over its own sigma ``sqrt(v / N)``), and its normal's tilt,
 over its predicted sigma and along the face in the direction away from the sensor (mean, with

@@ -24,7 +24,7 @@ scale): the pairs, the pairs with the groups, the groups alone; and their sigmas
 clustered by source cell (a hit is in up to one group per partner frame; a pair's source surfel
 in one pair per partner frame). ``--oracle``: also only the groups whose hits lie on their
 target's face of the mesh. ``--no-handover``: the surfels built without handing points across
-edges (``faces.assign_to_faces``).
+edges (``handover.assign_to_faces``).
 
 Prints per shape the RMS over the cases and the four parameters of error / dense bound, and its
 difference from the pairs' as a 90 % bootstrap interval over the cases (or, with ``--baseline``,

@@ -341,7 +341,7 @@ def compare(tags: list[str]) -> None:
 
 def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, variant: str = "") -> None:
     """Refined from the truth on ``n_draws`` noise draws and noise-free (see the docstring).
-    variant: ``no-handover`` (no point handed across cells, ``faces.assign_to_faces``),
+    variant: ``no-handover`` (no point handed across cells, ``handover.assign_to_faces``),
     ``no-curvature`` (anchors at the centroids, ``surfels.CURVATURE_CORRECTION``) or
     ``oracle-one-face`` (:func:`_one_face_only`): what the fit uses, to find where a bias comes
     from."""

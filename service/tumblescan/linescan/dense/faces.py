@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
 
@@ -56,7 +55,7 @@ def flat_cells(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.
     )
 
 
-def _tolerance(tilt_var_rad2: FloatArray, other: FloatArray) -> FloatArray:
+def normal_tolerance(tilt_var_rad2: FloatArray, other: FloatArray) -> FloatArray:
     """The angle two cells' normals may differ by on one face: ``FACE_MAX_ANGLE``, or
     ``FACE_NOISE_SIGMAS`` of both normals' noise, at most ``CURVED_MAX_ANGLE``."""
     return np.asarray(np.clip(FACE_NOISE_SIGMAS * np.sqrt(tilt_var_rad2 + other), FACE_MAX_ANGLE, CURVED_MAX_ANGLE))
@@ -71,7 +70,7 @@ def inside_face(
     interior: NDArray[np.bool_],
 ) -> NDArray[np.bool_]:
     """Cells whose 8 neighbours in the view were hit and face the same way (within
-    :func:`_tolerance` of both normals' noise ``tilt_var_rad2``), or bend smoothly with them (a
+    :func:`normal_tolerance` of both normals' noise ``tilt_var_rad2``), or bend smoothly with them (a
     curved surface: see ``CURVED_MAX_KINK``). A cell across an edge passes for flat when few of
     its points lie on the other face, yet its normal and centroid lean towards that face, always
     the same way: one of its neighbours lies on that face, and the opposite one does not.
@@ -98,7 +97,7 @@ def inside_face(
     # A neighbour with too few points for a normal of its own, not flat, or not interior (a part
     # of a cell on the silhouette, whose normal is noisy), neither vouches nor objects.
     silent = (count[safe] < MIN_SURFEL_POINTS) | ~flat[safe] | ~interior[safe]
-    tolerance = _tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe])
+    tolerance = normal_tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe])
     same_face = np.all((np.abs(cos) > np.cos(tolerance)) | silent, axis=1)
     # Normals of one frame face the sensor, so they share a sign; the mean of opposite
     # neighbours' normals lies along the cell's own on a smoothly curved surface.
@@ -120,7 +119,7 @@ def inside_face(
 @dataclass(frozen=True)
 class CellPlanes:
     """The cells' planes at ``T`` and the points in them, for :func:`beside_face` and
-    :func:`assign_to_faces`: ``neighbours`` (m, 8) cell indices (-1: none), ``cell`` (n,) each
+    :func:`.handover.assign_to_faces`: ``neighbours`` (m, 8) cell indices (-1: none), ``cell`` (n,) each
     point's cell, ``mapped_m`` (n, 3) the points at ``T``, ``mean_m`` (m, 3) centroids,
     ``normal_ref`` (m, 3) unit normals at ``T``, ``var_m2`` (m,) a point's noise variance along
     the normal, ``tilt_var_rad2`` (m,) the normal's tilt variance, ``count`` (m,) points."""
@@ -133,6 +132,12 @@ class CellPlanes:
     var_m2: FloatArray
     tilt_var_rad2: FloatArray
     count: FloatArray
+    # Each point's line of sight at ``T`` comes from its measured position ``xyz_obs`` (n, 3),
+    # its ``line`` (n,) and that line's ``Rt`` (lines, 3, 3): ``R(tau)^T``.
+    xyz_obs: FloatArray
+    line: IntArray
+    Rt: FloatArray
+    angle_var_rad2: float
 
 
 def beside_face(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -157,7 +162,7 @@ def beside_face(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[
     cos = np.where((nb >= 0) & face[safe], cos, -1.0)
     best = np.argmax(cos, axis=1)
     k_of = safe[rows, best]
-    agree = cos > np.cos(_tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe]))
+    agree = cos > np.cos(normal_tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe]))
     ok = candidate & agree[rows, best] & (agree.sum(axis=1) >= BESIDE_MIN_NEIGHBOURS)
     pts = np.flatnonzero(ok[cell])
     c = cell[pts]
@@ -183,7 +188,7 @@ def _z2_to_plane(planes: CellPlanes, pts: IntArray, k: IntArray) -> FloatArray:
 def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """The ``cells`` none of whose points (``mapped_m`` at ``T``) lies within
     ``BESIDE_MAX_SIGMAS`` of the plane of a neighbour in ``other`` that faces another way (normals
-    apart by more than :func:`_tolerance`), its sigma as in :func:`beside_face`.
+    apart by more than :func:`normal_tolerance`), its sigma as in :func:`beside_face`.
 
     A cell across an edge passes the face tests when the other face's points in it are few and
     lie within the noise of its plane (a panel's 4 cm edge at 2 range sigmas, the bus's 45 deg
@@ -202,7 +207,7 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     normal_ref, tilt_var_rad2 = planes.normal_ref, planes.tilt_var_rad2
     safe = np.where(neighbours >= 0, neighbours, 0)
     cos = np.abs(np.einsum("ni,nki->nk", normal_ref, normal_ref[safe]))
-    tolerance = _tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe])
+    tolerance = normal_tolerance(tilt_var_rad2[:, None], tilt_var_rad2[safe])
     apart = cells[:, None] & (neighbours >= 0) & other[safe] & (cos <= np.cos(tolerance))
     near = np.zeros(len(neighbours), dtype=bool)
     for j in range(neighbours.shape[1]):
@@ -229,91 +234,3 @@ def clear_of_outlines(
     safe = np.where(side >= 0, side, 0)
     sliver = (side >= 0) & ~interior[safe] & (count[safe] < OUTLINE_MIN_SHARE * count[:, None])
     return np.asarray(cells & ~np.any(sliver, axis=1))
-
-
-def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[np.bool_]) -> IntArray:
-    """Each point's cell ``(n,)``, with the points of the ``candidate`` cells (not on one face:
-    across an edge, beside a boom, on the silhouette) handed to the neighbouring ``face`` cell
-    on whose plane they lie.
-
-    A point ``p`` (``mapped_m`` at ``T``) of a candidate cell lies on the plane of a
-    neighbour ``k`` inside a face when
-    ``z^2 = (n_k . (p - c_k))^2 / (v_k (1 + 1 / N_k) + t_k |p - c_k|_perp^2) <= BESIDE_MAX_SIGMAS^2``
-    (the point's noise along ``n_k``, the plane's offset and its tilt ``t_k`` over the in-plane
-    offset: ``var_m2``, ``count``, ``tilt_var_rad2`` of ``k``). It goes to the one with the
-    least ``z``, unless
-
-    - a neighbour of another face (normals apart by more than :func:`_tolerance`) has its plane
-      within ``BESIDE_MAX_SIGMAS`` of the point too: near the edge's line a point lies on both
-      planes, and handing it to the nearer one would pick its noise's sign;
-    - a point on no neighbour's plane (another surface, whose own cells are not planar: a face
-      seen edge-on, a boom) lies within ``BESIDE_MAX_SIGMAS`` sigmas ``sqrt(v_k)`` of it: that
-      surface's points near the edge lie within the sigmas of the plane as well.
-
-    So the points of either face of a cell that straddles an edge join their face's surfel,
-    the band along the edge where the faces cannot be told apart stays out, and points on no
-    plane stay in their cell, which is not planar.
-    """
-    neighbours, cell, mapped_m, mean_m = planes.neighbours, planes.cell, planes.mapped_m, planes.mean_m
-    normal_ref, var_m2, tilt_var_rad2, count = planes.normal_ref, planes.var_m2, planes.tilt_var_rad2, planes.count
-    point_cell = cell.copy()
-    # The candidate cells with a neighbour inside a face, and each such neighbour's plane.
-    nb_all = np.where(neighbours >= 0, neighbours, 0)
-    valid_all = (neighbours >= 0) & face[nb_all]
-    cells = np.flatnonzero(candidate & np.any(valid_all, axis=1))
-    if len(cells) == 0:
-        return point_cell
-    nb, valid = nb_all[cells], valid_all[cells]
-    n_k, c_k = normal_ref[nb], mean_m[nb]  # (c, 8, 3)
-    v_k = var_m2[nb] * (1 + 1 / np.maximum(count[nb], 1))
-    t_k = tilt_var_rad2[nb]
-    # Which neighbours lie on different faces, (c, 8, 8).
-    cos = np.abs(np.einsum("cai,cbi->cab", n_k, n_k))
-    apart = cos <= np.cos(_tolerance(t_k[:, :, None], t_k[:, None, :]))
-    compact = np.full(len(candidate), -1)
-    compact[cells] = np.arange(len(cells))
-    pts = np.flatnonzero(compact[cell] >= 0)
-    ci = compact[cell[pts]]
-    # z^2 and the squared in-plane offset of every point from the plane of each valid
-    # neighbour: (point, neighbour) flattened, the neighbours' planes as one table of c * 8 rows.
-    z2_flat = np.full(len(pts) * 8, np.inf)
-    in_plane2_flat = np.full(len(pts) * 8, np.inf)
-    pair = np.flatnonzero(valid[ci].reshape(-1))
-    p = pair // 8
-    q = ci[p] * 8 + pair % 8
-    offset = mapped_m[pts[p]] - c_k.reshape(-1, 3)[q]
-    d = np.einsum("ni,ni->n", offset, n_k.reshape(-1, 3)[q])
-    in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
-    z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
-    z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
-    best = np.argmin(z2, axis=1)
-    gate = BESIDE_MAX_SIGMAS**2
-    on_plane = z2[np.arange(len(pts)), best] <= gate
-    # The face is the one whose plane fits; the surfel of that face the nearest along it, and
-    # the point is taken when it lies on that surfel's plane. The best-fitting of the face's
-    # surfels would sort the points by the sign of their noise (their planes differ by their
-    # own noise): on the folded wall the centroids of the surfels that took points in were 4
-    # standard errors off their face (rms), against 1.0 elsewhere. (Only a point on some plane
-    # can lie on the receiver's, so only those are weighed.)
-    fit = np.flatnonzero(on_plane)
-    cf, zf = ci[fit], z2[fit]
-    recv = np.argmin(np.where(apart[cf, best[fit]], np.inf, in_plane2[fit]), axis=1)
-    rows = np.arange(len(fit))
-    take = np.zeros(len(pts), dtype=bool)
-    take[fit] = (zf[rows, recv] <= gate) & ~np.any((zf <= gate) & apart[cf, recv], axis=1)
-    k = np.zeros(len(pts), dtype=np.int64)
-    k[fit] = nb[cf, recv]
-    if not np.any(take):
-        return point_cell
-    # Points on no neighbour's plane, of every frame: another frame cuts the edge elsewhere, or
-    # sees the other surface where this one does not (with this frame's only, 2.2 times the
-    # points of another face were handed over on the box at 100 m).
-    off = candidate[cell]
-    off[pts[on_plane]] = False
-    if np.any(off):
-        reach = BESIDE_MAX_SIGMAS * np.sqrt(var_m2[k[take]])
-        tree = cKDTree(mapped_m[off], balanced_tree=False, compact_nodes=False)
-        dist, _ = tree.query(mapped_m[pts[take]], distance_upper_bound=float(reach.max()), workers=-1)
-        take[take] = dist > reach
-    point_cell[pts[take]] = k[take]
-    return point_cell

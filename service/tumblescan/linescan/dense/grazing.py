@@ -91,7 +91,7 @@ def find_grazing(
     members' own)."""
     free = ~surf.planar[surf.point_cell]
     # Whole cells only: where the build handed some of a cell's points to a planar neighbour
-    # (faces.assign_to_faces), the rest is what that selection left, not a fair sample.
+    # (handover.assign_to_faces), the rest is what that selection left, not a fair sample.
     handed = np.zeros(len(surf.planar), dtype=bool)
     handed[data.cell[surf.point_cell != data.cell]] = True
     free &= ~handed[data.cell]

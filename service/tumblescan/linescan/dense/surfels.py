@@ -21,13 +21,13 @@ from .curvature import CURVATURE_RADIUS, foot_offset
 from .data import DenseData, cell_lines
 from .faces import (
     CellPlanes,
-    assign_to_faces,
     beside_face,
     clear_of_other_faces,
     clear_of_outlines,
     flat_cells,
     inside_face,
 )
+from .handover import assign_to_faces
 from .mapping import LineMapping
 
 # A surfel's normal pools the planar cells of every frame within this many surfel sizes (at T)
@@ -132,7 +132,7 @@ class Surfels:
     normal_var_rad2: FloatArray
     mapping: LineMapping  # the motion they were built with
     # Each point's surfel ``(n,)``: its cell, or the neighbour on whose face it lies when its
-    # own cell straddles an edge (:func:`~.faces.assign_to_faces`).
+    # own cell straddles an edge (:func:`~.handover.assign_to_faces`).
     point_cell: IntArray
 
 
@@ -190,7 +190,7 @@ def _tilt_variance(var_m2: FloatArray, spread_m2: FloatArray) -> FloatArray:
 def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> Surfels:
     """Moments of each cell's points mapped to ``T``: centroid, and normal from the scatter less
     the sensor's; which cells are planar; then the points of the cells across edges handed to
-    the planar cells of their faces (:func:`~.faces.assign_to_faces`), and the moments again."""
+    the planar cells of their faces (:func:`~.handover.assign_to_faces`), and the moments again."""
     m = len(data.cell_frame)
     origin = mapping.center
     mapped = mapping.apply_about_center(data.xyz_m, data.line)
@@ -208,7 +208,20 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
     spread = count * np.maximum(w[:, 1], 0.0)
     tilt_var = _tilt_variance(var, spread)
     planar = flat & data.interior & inside_face(data.neighbours, normal_obs, count, flat, tilt_var, data.interior)
-    planes = CellPlanes(data.neighbours, data.cell, mapped, mean, normal_ref, var, tilt_var, count)
+    planes = CellPlanes(
+        data.neighbours,
+        data.cell,
+        mapped,
+        mean,
+        normal_ref,
+        var,
+        tilt_var,
+        count,
+        data.xyz_m,
+        data.line,
+        mapping.Rt,
+        noise.angle_sigma_rad**2,
+    )
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
     # The cells that may hold a few points of another face, within the noise of their plane.
     planar = clear_of_other_faces(planes, planar, planar)
