@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._typing import FloatArray, IntArray
+from .mapping import LineMapping
 
 # A surfel is planar when its thinnest axis is this much thinner than the next one and no
 # thicker than a few sensor sigmas (an edge or a corner is thick for its size).
@@ -133,10 +134,10 @@ class CellPlanes:
     tilt_var_rad2: FloatArray
     count: FloatArray
     # Each point's line of sight at ``T`` comes from its measured position ``xyz_obs`` (n, 3),
-    # its ``line`` (n,) and that line's ``Rt`` (lines, 3, 3): ``R(tau)^T``.
+    # its ``line`` (n,) and the ``mapping`` the planes were built with.
     xyz_obs: FloatArray
     line: IntArray
-    Rt: FloatArray
+    mapping: LineMapping
     angle_var_rad2: float
 
 

@@ -9,6 +9,8 @@ took them in.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -72,10 +74,19 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     p = pair // 8
     q = ci[p] * 8 + pair % 8
     offset = mapped_m[pts[p]] - c_k.reshape(-1, 3)[q]
-    d = np.einsum("ni,ni->n", offset, n_k.reshape(-1, 3)[q])
+    n_q = n_k.reshape(-1, 3)[q]
+    d = np.einsum("ni,ni->n", offset, n_q)
     in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
     z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
     z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
+    if SIGHT_LINE:
+        # Each point's line of sight, and each plane's offset along it and normal across it.
+        u, rho2 = _sight_lines(planes, pts)
+        nu = np.einsum("ni,ni->n", u[p], n_q)
+        nu_flat = np.full(len(pts) * 8, -1.0)
+        nu_flat[pair] = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
+        d_flat = np.zeros(len(pts) * 8)
+        d_flat[pair] = d
     best = np.argmin(z2, axis=1)
     gate = BESIDE_MAX_SIGMAS**2
     on_plane = z2[np.arange(len(pts)), best] <= gate
@@ -90,9 +101,10 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     rows = np.arange(len(fit))
     take = np.zeros(len(pts), dtype=bool)
     if SIGHT_LINE:
-        seen = _seen_planes(
-            planes, pts[fit], n_k[cf], c_k[cf], t_k[cf], nb[cf], valid[cf], apart[cf], zf, in_plane2[fit]
-        )
+        sight = SightLines(d_flat.reshape(-1, 8), nu_flat.reshape(-1, 8), planes.angle_var_rad2 * rho2)
+        plane_var = var_m2[nb] / np.maximum(count[nb], 1)
+        seen = _seen_planes(sight, in_plane2, z2, valid[ci], ci, _edge_kinds(n_k, c_k, apart, u, ci), plane_var, t_k)
+        seen = seen[fit]
         recv = np.argmin(np.where(seen, in_plane2[fit], np.inf), axis=1)
         take[fit] = seen[rows, recv] & (zf[rows, recv] <= gate)
     else:
@@ -116,19 +128,65 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     return point_cell
 
 
+def _sight_lines(planes: CellPlanes, pts: IntArray) -> tuple[FloatArray, FloatArray]:
+    """The unit line of sight of each point ``pts`` at ``T`` ``(p, 3)`` (the sensor at the
+    origin of its own frame; :meth:`~.mapping.LineMapping.rotate` turns its measured direction),
+    and its squared range ``(p,)``."""
+    xyz = planes.xyz_obs[pts]
+    u = planes.mapping.rotate(xyz, planes.line[pts])
+    rho2 = np.einsum("ni,ni->n", xyz, xyz)
+    return u / np.sqrt(rho2)[:, None], rho2
+
+
+@dataclass(frozen=True)
+class SightLines:
+    """Per point and neighbour ``(p, 8)``: the plane's offset ``d`` from the point along its
+    normal and the normal's cosine ``nu`` with the line of sight; per point ``(p,)``, the line's
+    angle noise across it at the point's range, ``lateral_var`` (``(s_a rho)^2``, m²)."""
+
+    d: FloatArray
+    nu: FloatArray
+    lateral_var: FloatArray
+
+
+@dataclass(frozen=True)
+class EdgeKinds:
+    """Per candidate cell and pair of its neighbours (``NEIGHBOUR_PAIRS``), ``(c, 28)``: whether
+    their planes lie on different faces (``apart``), whether each one's centroid lies behind the
+    other's plane (``convex``) or both in front (``concave``), and their normals' dot product."""
+
+    apart: NDArray[np.bool_]
+    convex: NDArray[np.bool_]
+    concave: NDArray[np.bool_]
+    dot: FloatArray
+
+
+def _edge_kinds(n_k: FloatArray, c_k: FloatArray, apart: NDArray[np.bool_], u: FloatArray, ci: IntArray) -> EdgeKinds:
+    """:class:`EdgeKinds` of the candidate cells' neighbours' planes (normals ``n_k`` and
+    centroids ``c_k``, ``(c, 8, 3)``), the normals turned to face the sensor along the line of
+    sight ``u`` of one of the cell's points (``ci``: each point's candidate cell)."""
+    one = np.zeros(len(n_k), dtype=np.int64)
+    one[ci] = np.arange(len(ci))
+    facing = n_k * -np.sign(np.einsum("cki,ci->ck", n_k, u[one]))[:, :, None]
+    a, b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
+    gap = c_k[:, b] - c_k[:, a]
+    behind_a = np.einsum("cji,cji->cj", facing[:, a], gap) < 0  # b's centroid behind a's plane
+    behind_b = np.einsum("cji,cji->cj", facing[:, b], gap) > 0
+    dot = np.einsum("cji,cji->cj", n_k[:, a], n_k[:, b])
+    return EdgeKinds(apart[:, a, b], behind_a & behind_b, ~behind_a & ~behind_b, dot)
+
+
 def _seen_planes(
-    planes: CellPlanes,
-    pts: IntArray,
-    n_k: FloatArray,
-    c_k: FloatArray,
-    t_k: FloatArray,
-    nb: IntArray,
-    valid: NDArray[np.bool_],
-    apart: NDArray[np.bool_],
-    z2: FloatArray,
+    sight: SightLines,
     in_plane2: FloatArray,
+    z2: FloatArray,
+    valid: NDArray[np.bool_],
+    cell: IntArray,
+    kinds: EdgeKinds,
+    plane_var: FloatArray,
+    tilt_var: FloatArray,
 ) -> NDArray[np.bool_]:
-    """Which neighbours' planes ``(p, 8)`` the points ``pts`` may lie on, decided by where each
+    """Which of their neighbours' planes ``(p, 8)`` points may lie on, decided by where each
     point's line of sight meets them, which its range noise does not move.
 
     A point ``p`` lies on its line of sight ``u`` (at ``T``); plane ``k`` meets that line
@@ -137,38 +195,30 @@ def _seen_planes(
     ``delta_k`` alike: ``delta_a - delta_b`` is the same for every draw of it. Across a convex
     edge (each plane's centroid behind the other's plane, normals facing the sensor) the line
     sees the farther of the two planes, across a concave one the nearer: a plane the line does
-    not see, by more than ``BESIDE_MAX_SIGMAS`` of the two planes' own noise (offset and tilt,
-    and the line's angle noise across them), is not the point's. A pair of planes that is
-    neither (one in front of the other) keeps the test on the point: it lies on neither plane
-    when it lies within the sigmas of both.
+    not see, by more than ``BESIDE_MAX_SIGMAS`` sigmas, is not the point's. The sigma is the
+    planes' own noise along the line (``plane_var`` of their offset and ``tilt_var`` times
+    ``in_plane2``, over ``(n_k . u)^2``) and the line's angle noise across them
+    (``lateral_var |n_a / (n_a . u) - n_b / (n_b . u)|^2``). A pair of planes that is neither
+    (one in front of the other) keeps the test on the point: it lies on neither plane when it
+    lies within the sigmas of both (``z2``).
+
+    in_plane2, z2, valid (the neighbours inside a face): ``(p, 8)``; cell: ``(p,)`` each point's
+    row of ``kinds``, ``plane_var`` and ``tilt_var`` ``(c, 8)``.
     """
-    u = np.einsum("nij,nj->ni", planes.Rt[planes.line[pts]], planes.xyz_obs[pts])
-    rho = np.linalg.norm(u, axis=1)
-    u /= rho[:, None]
-    lateral_var = planes.angle_var_rad2 * rho**2
-    nu = np.einsum("pki,pi->pk", n_k, u)
-    nu = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
-    offset = planes.mapped_m[pts][:, None, :] - c_k
-    delta = -np.einsum("pki,pki->pk", n_k, offset) / nu
-    # Each plane's offset and tilt noise, along the line.
-    count = np.maximum(planes.count[nb], 1)
-    plane_var = (planes.var_m2[nb] / count + t_k * in_plane2) / nu**2
-    facing = -np.sign(nu)  # turns n_k to face the sensor
     lost = ~valid
     gate = BESIDE_MAX_SIGMAS**2
-    for a, b in NEIGHBOUR_PAIRS:
-        idx = np.flatnonzero(apart[:, a, b] & valid[:, a] & valid[:, b])
+    for j, (a, b) in enumerate(NEIGHBOUR_PAIRS):
+        idx = np.flatnonzero(kinds.apart[cell, j] & valid[:, a] & valid[:, b])
         if len(idx) == 0:
             continue
-        na, nb_ = n_k[idx, a], n_k[idx, b]
-        gap = c_k[idx, b] - c_k[idx, a]
-        behind_a = facing[idx, a] * np.einsum("pi,pi->p", na, gap) < 0  # b's centroid behind a's plane
-        behind_b = facing[idx, b] * np.einsum("pi,pi->p", nb_, -gap) < 0
-        convex, concave = behind_a & behind_b, ~behind_a & ~behind_b
-        diff = delta[idx, a] - delta[idx, b]
-        g = na / nu[idx, a, None] - nb_ / nu[idx, b, None]
-        var = plane_var[idx, a] + plane_var[idx, b] + lateral_var[idx] * np.einsum("pi,pi->p", g, g)
+        c = cell[idx]
+        ia, ib = 1 / sight.nu[idx, a], 1 / sight.nu[idx, b]
+        diff = sight.d[idx, b] * ib - sight.d[idx, a] * ia  # delta_a - delta_b
+        var = (plane_var[c, a] + tilt_var[c, a] * in_plane2[idx, a]) * ia**2
+        var += (plane_var[c, b] + tilt_var[c, b] * in_plane2[idx, b]) * ib**2
+        var += sight.lateral_var[idx] * (ia**2 + ib**2 - 2 * kinds.dot[c, j] * ia * ib)
         clear = diff**2 > gate * var
+        convex, concave = kinds.convex[c, j], kinds.concave[c, j]
         sees_a = clear & ((convex & (diff > 0)) | (concave & (diff < 0)))
         sees_b = clear & ((convex & (diff < 0)) | (concave & (diff > 0)))
         mixed = ~(convex | concave)

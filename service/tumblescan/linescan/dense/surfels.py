@@ -219,7 +219,7 @@ def build_surfels(data: DenseData, mapping: LineMapping, noise: SensorNoise) -> 
         count,
         data.xyz_m,
         data.line,
-        mapping.Rt,
+        mapping,
         noise.angle_sigma_rad**2,
     )
     planar |= beside_face(planes, flat & data.interior & ~planar, planar)
