@@ -45,6 +45,7 @@ BESIDE_MAX_SIGMAS = 3.0
 # A cell beside the outline is left out when the outline's cell holds less than this share of
 # its points (see clear_of_outlines).
 OUTLINE_MIN_SHARE = 0.25
+CLEAR_BY_SIGHT = True
 
 
 def flat_cells(w: FloatArray, var: FloatArray, count: FloatArray) -> NDArray[np.bool_]:
@@ -214,8 +215,81 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     for j in range(neighbours.shape[1]):
         pts = np.flatnonzero(apart[cell, j])
         c = cell[pts]
-        near[c[_z2_to_plane(planes, pts, safe[c, j]) <= BESIDE_MAX_SIGMAS**2]] = True
+        if CLEAR_BY_SIGHT:
+            close = ~_sees_own_plane(planes, pts, c, safe[c, j])
+        else:
+            close = _z2_to_plane(planes, pts, safe[c, j]) <= BESIDE_MAX_SIGMAS**2
+        near[c[close]] = True
     return np.asarray(cells & ~near)
+
+
+def _sees_own_plane(planes: CellPlanes, pts: IntArray, a: IntArray, b: IntArray) -> NDArray[np.bool_]:
+    """Whether each point's line of sight sees the plane of its own cell ``a`` rather than that
+    of cell ``b`` (another face), by :func:`line_sees`; where the two planes meet at no edge (one
+    in front of the other), whether the point lies off ``b``'s plane."""
+    u, rho2 = sight_lines(planes, pts)
+    p = planes.mapped_m[pts]
+    n_a, n_b = planes.normal_ref[a], planes.normal_ref[b]
+    nu_a, nu_b = (_cosine(n, u) for n in (n_a, n_b))
+    off_a, off_b = p - planes.mean_m[a], p - planes.mean_m[b]
+    d_a, d_b = np.einsum("ni,ni->n", n_a, off_a), np.einsum("ni,ni->n", n_b, off_b)
+    var = _along_var(planes, a, np.einsum("ni,ni->n", off_a, off_a) - d_a**2) / nu_a**2
+    var += _along_var(planes, b, np.einsum("ni,ni->n", off_b, off_b) - d_b**2) / nu_b**2
+    var += (
+        planes.angle_var_rad2 * rho2 * (1 / nu_a**2 + 1 / nu_b**2 - 2 * np.einsum("ni,ni->n", n_a, n_b) / (nu_a * nu_b))
+    )
+    convex, concave = edge_kind(n_a, n_b, planes.mean_m[b] - planes.mean_m[a], u)
+    sees_a, _ = line_sees(d_b / nu_b - d_a / nu_a, var, convex, concave)
+    mixed = ~(convex | concave)
+    return np.asarray(sees_a | (mixed & (_z2_to_plane(planes, pts, b) > BESIDE_MAX_SIGMAS**2)))
+
+
+def _cosine(n: FloatArray, u: FloatArray) -> FloatArray:
+    """``n . u`` per row, kept from zero (a plane seen edge-on)."""
+    nu = np.einsum("ni,ni->n", n, u)
+    return np.asarray(np.where(np.abs(nu) < 1e-6, -1e-6, nu))
+
+
+def _along_var(planes: CellPlanes, k: IntArray, in_plane2: FloatArray) -> FloatArray:
+    """The variance of cell ``k``'s plane along its normal at an in-plane offset whose square is
+    ``in_plane2``: its centroid's and its tilt's."""
+    return np.asarray(planes.var_m2[k] / np.maximum(planes.count[k], 1) + planes.tilt_var_rad2[k] * in_plane2)
+
+
+def sight_lines(planes: CellPlanes, pts: IntArray) -> tuple[FloatArray, FloatArray]:
+    """The unit line of sight of each point ``pts`` at ``T`` ``(p, 3)`` (the sensor at the
+    origin of its own frame; :meth:`~.mapping.LineMapping.rotate` turns its measured direction),
+    and its squared range ``(p,)``."""
+    xyz = planes.xyz_obs[pts]
+    u = planes.mapping.rotate(xyz, planes.line[pts])
+    rho2 = np.einsum("ni,ni->n", xyz, xyz)
+    return u / np.sqrt(rho2)[:, None], rho2
+
+
+def edge_kind(
+    n_a: FloatArray, n_b: FloatArray, gap: FloatArray, u: FloatArray
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Whether two planes (unit normals ``n_a``, ``n_b``, either sign; ``gap`` from ``a``'s
+    centroid to ``b``'s) meet at a convex edge, each centroid behind the other's plane as seen
+    along ``u``, or a concave one, each in front."""
+    facing_a = n_a * -np.sign(np.einsum("...i,...i->...", n_a, u))[..., None]
+    facing_b = n_b * -np.sign(np.einsum("...i,...i->...", n_b, u))[..., None]
+    behind_a = np.einsum("...i,...i->...", facing_a, gap) < 0  # b's centroid behind a's plane
+    behind_b = np.einsum("...i,...i->...", facing_b, gap) > 0
+    return np.asarray(behind_a & behind_b), np.asarray(~behind_a & ~behind_b)
+
+
+def line_sees(
+    diff: FloatArray, var: FloatArray, convex: NDArray[np.bool_], concave: NDArray[np.bool_]
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Which of two planes a line of sight sees, ``(sees_a, sees_b)``, from how much farther along
+    it plane ``a`` lies than ``b`` (``diff = delta_a - delta_b``) and that difference's variance
+    ``var``: across a convex edge the farther plane, across a concave one the nearer, and neither
+    when ``diff`` is within ``BESIDE_MAX_SIGMAS`` of its sigmas."""
+    clear = diff**2 > BESIDE_MAX_SIGMAS**2 * var
+    sees_a = clear & ((convex & (diff > 0)) | (concave & (diff < 0)))
+    sees_b = clear & ((convex & (diff < 0)) | (concave & (diff > 0)))
+    return np.asarray(sees_a), np.asarray(sees_b)
 
 
 def clear_of_outlines(

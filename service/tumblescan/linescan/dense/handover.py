@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
-from .faces import BESIDE_MAX_SIGMAS, CellPlanes, normal_tolerance
+from .faces import BESIDE_MAX_SIGMAS, CellPlanes, edge_kind, line_sees, normal_tolerance, sight_lines
 
 SIGHT_LINE = True
 # The pairs of a cell's 8 neighbours.
@@ -81,7 +81,7 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
     if SIGHT_LINE:
         # Each point's line of sight, and each plane's offset along it and normal across it.
-        u, rho2 = _sight_lines(planes, pts)
+        u, rho2 = sight_lines(planes, pts)
         nu = np.einsum("ni,ni->n", u[p], n_q)
         nu_flat = np.full(len(pts) * 8, -1.0)
         nu_flat[pair] = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
@@ -128,16 +128,6 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     return point_cell
 
 
-def _sight_lines(planes: CellPlanes, pts: IntArray) -> tuple[FloatArray, FloatArray]:
-    """The unit line of sight of each point ``pts`` at ``T`` ``(p, 3)`` (the sensor at the
-    origin of its own frame; :meth:`~.mapping.LineMapping.rotate` turns its measured direction),
-    and its squared range ``(p,)``."""
-    xyz = planes.xyz_obs[pts]
-    u = planes.mapping.rotate(xyz, planes.line[pts])
-    rho2 = np.einsum("ni,ni->n", xyz, xyz)
-    return u / np.sqrt(rho2)[:, None], rho2
-
-
 @dataclass(frozen=True)
 class SightLines:
     """Per point and neighbour ``(p, 8)``: the plane's offset ``d`` from the point along its
@@ -167,13 +157,10 @@ def _edge_kinds(n_k: FloatArray, c_k: FloatArray, apart: NDArray[np.bool_], u: F
     sight ``u`` of one of the cell's points (``ci``: each point's candidate cell)."""
     one = np.zeros(len(n_k), dtype=np.int64)
     one[ci] = np.arange(len(ci))
-    facing = n_k * -np.sign(np.einsum("cki,ci->ck", n_k, u[one]))[:, :, None]
     a, b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
-    gap = c_k[:, b] - c_k[:, a]
-    behind_a = np.einsum("cji,cji->cj", facing[:, a], gap) < 0  # b's centroid behind a's plane
-    behind_b = np.einsum("cji,cji->cj", facing[:, b], gap) > 0
+    convex, concave = edge_kind(n_k[:, a], n_k[:, b], c_k[:, b] - c_k[:, a], u[one][:, None, :])
     dot = np.einsum("cji,cji->cj", n_k[:, a], n_k[:, b])
-    return EdgeKinds(apart[:, a, b], behind_a & behind_b, ~behind_a & ~behind_b, dot)
+    return EdgeKinds(apart[:, a, b], convex, concave, dot)
 
 
 def _seen_planes(
@@ -217,11 +204,8 @@ def _seen_planes(
         var = (plane_var[c, a] + tilt_var[c, a] * in_plane2[idx, a]) * ia**2
         var += (plane_var[c, b] + tilt_var[c, b] * in_plane2[idx, b]) * ib**2
         var += sight.lateral_var[idx] * (ia**2 + ib**2 - 2 * kinds.dot[c, j] * ia * ib)
-        clear = diff**2 > gate * var
-        convex, concave = kinds.convex[c, j], kinds.concave[c, j]
-        sees_a = clear & ((convex & (diff > 0)) | (concave & (diff < 0)))
-        sees_b = clear & ((convex & (diff < 0)) | (concave & (diff > 0)))
-        mixed = ~(convex | concave)
+        sees_a, sees_b = line_sees(diff, var, kinds.convex[c, j], kinds.concave[c, j])
+        mixed = ~(kinds.convex[c, j] | kinds.concave[c, j])
         lost[idx, a] |= ~(sees_a | (mixed & (z2[idx, b] > gate)))
         lost[idx, b] |= ~(sees_b | (mixed & (z2[idx, a] > gate)))
     return np.asarray(~lost)
