@@ -18,7 +18,6 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from .faces import BESIDE_MAX_SIGMAS, CellPlanes, edge_kind, line_sees, normal_tolerance, sight_lines
 
-SIGHT_LINE = True
 # The pairs of a cell's 8 neighbours.
 NEIGHBOUR_PAIRS = tuple((a, b) for a in range(8) for b in range(a + 1, 8))
 
@@ -32,15 +31,19 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     neighbour ``k`` inside a face when
     ``z^2 = (n_k . (p - c_k))^2 / (v_k (1 + 1 / N_k) + t_k |p - c_k|_perp^2) <= BESIDE_MAX_SIGMAS^2``
     (the point's noise along ``n_k``, the plane's offset and its tilt ``t_k`` over the in-plane
-    offset: ``var_m2``, ``count``, ``tilt_var_rad2`` of ``k``). It goes to the one with the
-    least ``z``, unless
+    offset: ``var_m2``, ``count``, ``tilt_var_rad2`` of ``k``). Of the neighbours whose planes
+    its line of sight may meet on their face (:func:`_seen_planes`: across an edge, the one the
+    line sees, decided by where it meets each plane, not by the point's noise), it goes to the one
+    nearest along its plane, when it lies on that plane, unless a point on no neighbour's plane
+    (another surface, whose own cells are not planar: a face seen edge-on, a boom) lies within
+    ``BESIDE_MAX_SIGMAS`` sigmas ``sqrt(v_k)`` of it: that surface's points near the edge lie
+    within the sigmas of the plane as well.
 
-    - a neighbour of another face (normals apart by more than :func:`~.faces.normal_tolerance`) has its plane
-      within ``BESIDE_MAX_SIGMAS`` of the point too: near the edge's line a point lies on both
-      planes, and handing it to the nearer one would pick its noise's sign;
-    - a point on no neighbour's plane (another surface, whose own cells are not planar: a face
-      seen edge-on, a boom) lies within ``BESIDE_MAX_SIGMAS`` sigmas ``sqrt(v_k)`` of it: that
-      surface's points near the edge lie within the sigmas of the plane as well.
+    Deciding the face by the point's own offsets (none when it lay within the sigmas of another
+    face's plane too) kept the points whose noise put them off that plane: beside a ridge they
+    lay 0.21 range sigmas nearer the sensor on average, beside a valley as far beyond
+    (tests/linescan/dense/test_surfels.py), and the surfels that took them in were biased the
+    same way in every frame (docs/linescan.md, twelfth round).
 
     So the points of either face of a cell that straddles an edge join their face's surfel,
     the band along the edge where the faces cannot be told apart stays out, and points on no
@@ -79,37 +82,29 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
     z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
     z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
-    if SIGHT_LINE:
-        # Each point's line of sight, and each plane's offset along it and normal across it.
-        u, rho2 = sight_lines(planes, pts)
-        nu = np.einsum("ni,ni->n", u[p], n_q)
-        nu_flat = np.full(len(pts) * 8, -1.0)
-        nu_flat[pair] = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
-        d_flat = np.zeros(len(pts) * 8)
-        d_flat[pair] = d
-    best = np.argmin(z2, axis=1)
+    # Each point's line of sight, and each plane's offset along it and normal across it.
+    u, rho2 = sight_lines(planes, pts)
+    nu = np.einsum("ni,ni->n", u[p], n_q)
+    nu_flat = np.full(len(pts) * 8, -1.0)
+    nu_flat[pair] = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
+    d_flat = np.zeros(len(pts) * 8)
+    d_flat[pair] = d
     gate = BESIDE_MAX_SIGMAS**2
-    on_plane = z2[np.arange(len(pts)), best] <= gate
-    # The face is the one whose plane fits; the surfel of that face the nearest along it, and
-    # the point is taken when it lies on that surfel's plane. The best-fitting of the face's
-    # surfels would sort the points by the sign of their noise (their planes differ by their
-    # own noise): on the folded wall the centroids of the surfels that took points in were 4
-    # standard errors off their face (rms), against 1.0 elsewhere. (Only a point on some plane
-    # can lie on the receiver's, so only those are weighed.)
+    on_plane = np.min(z2, axis=1) <= gate
+    # The receiver is the nearest along its plane of the surfels the line of sight may meet, not
+    # the best-fitting: that would sort the points by the sign of their noise (the surfels' planes
+    # differ by their own noise): on the folded wall the centroids of the surfels that took points
+    # in were 4 standard errors off their face (rms), against 1.0 elsewhere. (Only a point on some
+    # plane can lie on the receiver's, so only those are weighed.)
     fit = np.flatnonzero(on_plane)
     cf, zf = ci[fit], z2[fit]
     rows = np.arange(len(fit))
+    sight = SightLines(d_flat.reshape(-1, 8), nu_flat.reshape(-1, 8), planes.angle_var_rad2 * rho2)
+    plane_var = var_m2[nb] / np.maximum(count[nb], 1)
+    seen = _seen_planes(sight, in_plane2, z2, valid[ci], ci, _edge_kinds(n_k, c_k, apart, u, ci), plane_var, t_k)[fit]
+    recv = np.argmin(np.where(seen, in_plane2[fit], np.inf), axis=1)
     take = np.zeros(len(pts), dtype=bool)
-    if SIGHT_LINE:
-        sight = SightLines(d_flat.reshape(-1, 8), nu_flat.reshape(-1, 8), planes.angle_var_rad2 * rho2)
-        plane_var = var_m2[nb] / np.maximum(count[nb], 1)
-        seen = _seen_planes(sight, in_plane2, z2, valid[ci], ci, _edge_kinds(n_k, c_k, apart, u, ci), plane_var, t_k)
-        seen = seen[fit]
-        recv = np.argmin(np.where(seen, in_plane2[fit], np.inf), axis=1)
-        take[fit] = seen[rows, recv] & (zf[rows, recv] <= gate)
-    else:
-        recv = np.argmin(np.where(apart[cf, best[fit]], np.inf, in_plane2[fit]), axis=1)
-        take[fit] = (zf[rows, recv] <= gate) & ~np.any((zf <= gate) & apart[cf, recv], axis=1)
+    take[fit] = seen[rows, recv] & (zf[rows, recv] <= gate)
     k = np.zeros(len(pts), dtype=np.int64)
     k[fit] = nb[cf, recv]
     if not np.any(take):
