@@ -82,13 +82,6 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     in_plane2_flat[pair] = np.einsum("ni,ni->n", offset, offset) - d**2
     z2_flat[pair] = d**2 / (v_k.reshape(-1)[q] + t_k.reshape(-1)[q] * in_plane2_flat[pair])
     z2, in_plane2 = z2_flat.reshape(-1, 8), in_plane2_flat.reshape(-1, 8)
-    # Each point's line of sight, and each plane's offset along it and normal across it.
-    u, rho2 = sight_lines(planes, pts)
-    nu = np.einsum("ni,ni->n", u[p], n_q)
-    nu_flat = np.full(len(pts) * 8, -1.0)
-    nu_flat[pair] = np.where(np.abs(nu) < 1e-6, -1e-6, nu)
-    d_flat = np.zeros(len(pts) * 8)
-    d_flat[pair] = d
     gate = BESIDE_MAX_SIGMAS**2
     on_plane = np.min(z2, axis=1) <= gate
     # The receiver is the nearest along its plane of the surfels the line of sight may meet, not
@@ -99,9 +92,25 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     fit = np.flatnonzero(on_plane)
     cf, zf = ci[fit], z2[fit]
     rows = np.arange(len(fit))
-    sight = SightLines(d_flat.reshape(-1, 8), nu_flat.reshape(-1, 8), planes.angle_var_rad2 * rho2)
-    plane_var = var_m2[nb] / np.maximum(count[nb], 1)
-    seen = _seen_planes(sight, in_plane2, z2, valid[ci], ci, _edge_kinds(n_k, c_k, apart, u, ci), plane_var, t_k)[fit]
+    seen = valid[cf]
+    # Where two of a cell's neighbours lie on different faces, its points' lines of sight decide
+    # which they may lie on (a tenth to a half of the candidate cells' points).
+    pair_a, pair_b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
+    across = apart[:, pair_a, pair_b] & valid[:, pair_a] & valid[:, pair_b]  # (c, 28)
+    e = np.flatnonzero(np.any(across, axis=1)[cf])
+    if len(e):
+        ce = cf[e]
+        u, rho2 = sight_lines(planes, pts[fit[e]])
+        offset_e = mapped_m[pts[fit[e]]][:, None, :] - c_k[ce]
+        nu = np.einsum("eki,ei->ek", n_k[ce], u)
+        sight = SightLines(
+            np.einsum("eki,eki->ek", offset_e, n_k[ce]),
+            np.where(np.abs(nu) < 1e-6, -1e-6, nu),
+            planes.angle_var_rad2 * rho2,
+        )
+        kinds = _edge_kinds(n_k, c_k, across, u, ce)
+        plane_var = var_m2[nb] / np.maximum(count[nb], 1)
+        seen[e] = _seen_planes(sight, in_plane2[fit[e]], zf[e], seen[e], ce, kinds, plane_var, t_k)
     recv = np.argmin(np.where(seen, in_plane2[fit], np.inf), axis=1)
     take = np.zeros(len(pts), dtype=bool)
     take[fit] = seen[rows, recv] & (zf[rows, recv] <= gate)
@@ -137,25 +146,27 @@ class SightLines:
 @dataclass(frozen=True)
 class EdgeKinds:
     """Per candidate cell and pair of its neighbours (``NEIGHBOUR_PAIRS``), ``(c, 28)``: whether
-    their planes lie on different faces (``apart``), whether each one's centroid lies behind the
-    other's plane (``convex``) or both in front (``concave``), and their normals' dot product."""
+    both are inside a face and their planes lie on different faces (``across``), whether each
+    one's centroid lies behind the other's plane (``convex``) or both in front (``concave``), and
+    their normals' dot product."""
 
-    apart: NDArray[np.bool_]
+    across: NDArray[np.bool_]
     convex: NDArray[np.bool_]
     concave: NDArray[np.bool_]
     dot: FloatArray
 
 
-def _edge_kinds(n_k: FloatArray, c_k: FloatArray, apart: NDArray[np.bool_], u: FloatArray, ci: IntArray) -> EdgeKinds:
+def _edge_kinds(n_k: FloatArray, c_k: FloatArray, across: NDArray[np.bool_], u: FloatArray, ce: IntArray) -> EdgeKinds:
     """:class:`EdgeKinds` of the candidate cells' neighbours' planes (normals ``n_k`` and
-    centroids ``c_k``, ``(c, 8, 3)``), the normals turned to face the sensor along the line of
-    sight ``u`` of one of the cell's points (``ci``: each point's candidate cell)."""
+    centroids ``c_k``, ``(c, 8, 3)``; ``across``, ``(c, 28)``, the pairs on different faces), the
+    normals turned to face the sensor along the line of sight ``u`` of one of the cell's points
+    (``ce``: each line's cell)."""
     one = np.zeros(len(n_k), dtype=np.int64)
-    one[ci] = np.arange(len(ci))
+    one[ce] = np.arange(len(ce))
     a, b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
     convex, concave = edge_kind(n_k[:, a], n_k[:, b], c_k[:, b] - c_k[:, a], u[one][:, None, :])
     dot = np.einsum("cji,cji->cj", n_k[:, a], n_k[:, b])
-    return EdgeKinds(apart[:, a, b], convex, concave, dot)
+    return EdgeKinds(across, convex, concave, dot)
 
 
 def _seen_planes(
@@ -190,7 +201,7 @@ def _seen_planes(
     lost = ~valid
     gate = BESIDE_MAX_SIGMAS**2
     for j, (a, b) in enumerate(NEIGHBOUR_PAIRS):
-        idx = np.flatnonzero(kinds.apart[cell, j] & valid[:, a] & valid[:, b])
+        idx = np.flatnonzero(kinds.across[cell, j])
         if len(idx) == 0:
             continue
         c = cell[idx]
