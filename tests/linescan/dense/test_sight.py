@@ -1,4 +1,4 @@
-"""Which of two faces' planes a line of sight sees (faces.edge_kind, faces.line_sees), on a ridge
+"""Which of two faces' planes a line of sight sees (handover.edge_kind, handover.line_sees), on a ridge
 and a valley whose true surface is known."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tumblescan.linescan.dense.faces import edge_kind, line_sees
+from tumblescan.linescan.dense.handover import edge_kind, line_sees
 
 TILT = np.radians(30.0)
 

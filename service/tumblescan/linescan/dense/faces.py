@@ -205,7 +205,7 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     taking it as another face left out the cells beside every edge of the folded wall (72 -> 61 %
     of its points).
 
-    Also tried, and left out: the hand-over's test by the line of sight (:func:`line_sees`) in
+    Also tried, and left out: the hand-over's test by the line of sight (:func:`.handover.line_sees`) in
     place of the points' offsets, leaving a cell out only when a point's line does not clearly
     see its own plane. It kept 0.3 % more cells (box and truss at 50 m, at the true motion) and
     was a little worse in the whole fit: RMS error / bound +0.03 on the dish-boom, the long
@@ -222,42 +222,6 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
         c = cell[pts]
         near[c[_z2_to_plane(planes, pts, safe[c, j]) <= BESIDE_MAX_SIGMAS**2]] = True
     return np.asarray(cells & ~near)
-
-
-def sight_lines(planes: CellPlanes, pts: IntArray) -> tuple[FloatArray, FloatArray]:
-    """The unit line of sight of each point ``pts`` at ``T`` ``(p, 3)`` (the sensor at the
-    origin of its own frame; :meth:`~.mapping.LineMapping.rotate` turns its measured direction),
-    and its squared range ``(p,)``."""
-    xyz = planes.xyz_obs[pts]
-    u = planes.mapping.rotate(xyz, planes.line[pts])
-    rho2 = np.einsum("ni,ni->n", xyz, xyz)
-    return u / np.sqrt(rho2)[:, None], rho2
-
-
-def edge_kind(
-    n_a: FloatArray, n_b: FloatArray, gap: FloatArray, u: FloatArray
-) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Whether two planes (unit normals ``n_a``, ``n_b``, either sign; ``gap`` from ``a``'s
-    centroid to ``b``'s) meet at a convex edge, each centroid behind the other's plane as seen
-    along ``u``, or a concave one, each in front."""
-    facing_a = n_a * -np.sign(np.einsum("...i,...i->...", n_a, u))[..., None]
-    facing_b = n_b * -np.sign(np.einsum("...i,...i->...", n_b, u))[..., None]
-    behind_a = np.einsum("...i,...i->...", facing_a, gap) < 0  # b's centroid behind a's plane
-    behind_b = np.einsum("...i,...i->...", facing_b, gap) > 0
-    return np.asarray(behind_a & behind_b), np.asarray(~behind_a & ~behind_b)
-
-
-def line_sees(
-    diff: FloatArray, var: FloatArray, convex: NDArray[np.bool_], concave: NDArray[np.bool_]
-) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Which of two planes a line of sight sees, ``(sees_a, sees_b)``, from how much farther along
-    it plane ``a`` lies than ``b`` (``diff = delta_a - delta_b``) and that difference's variance
-    ``var``: across a convex edge the farther plane, across a concave one the nearer, and neither
-    when ``diff`` is within ``BESIDE_MAX_SIGMAS`` of its sigmas."""
-    clear = diff**2 > BESIDE_MAX_SIGMAS**2 * var
-    sees_a = clear & ((convex & (diff > 0)) | (concave & (diff < 0)))
-    sees_b = clear & ((convex & (diff < 0)) | (concave & (diff > 0)))
-    return np.asarray(sees_a), np.asarray(sees_b)
 
 
 def clear_of_outlines(

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from ..._typing import FloatArray, IntArray
-from .faces import BESIDE_MAX_SIGMAS, CellPlanes, edge_kind, line_sees, normal_tolerance, sight_lines
+from .faces import BESIDE_MAX_SIGMAS, CellPlanes, normal_tolerance
 
 # The pairs of a cell's 8 neighbours.
 NEIGHBOUR_PAIRS = tuple((a, b) for a in range(8) for b in range(a + 1, 8))
@@ -101,6 +101,7 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     if len(e):
         ce = cf[e]
         u, rho2 = sight_lines(planes, pts[fit[e]])
+        # The offsets of these few points again, rather than every pair's scattered into a table.
         offset_e = mapped_m[pts[fit[e]]][:, None, :] - c_k[ce]
         nu = np.einsum("eki,ei->ek", n_k[ce], u)
         sight = SightLines(
@@ -130,6 +131,42 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
         take[take] = dist > reach
     point_cell[pts[take]] = k[take]
     return point_cell
+
+
+def sight_lines(planes: CellPlanes, pts: IntArray) -> tuple[FloatArray, FloatArray]:
+    """The unit line of sight of each point ``pts`` at ``T`` ``(p, 3)`` (the sensor at the
+    origin of its own frame; :meth:`~.mapping.LineMapping.rotate` turns its measured direction),
+    and its squared range ``(p,)``."""
+    xyz = planes.xyz_obs[pts]
+    u = planes.mapping.rotate(xyz, planes.line[pts])
+    rho2 = np.einsum("ni,ni->n", xyz, xyz)
+    return u / np.sqrt(rho2)[:, None], rho2
+
+
+def edge_kind(
+    n_a: FloatArray, n_b: FloatArray, gap: FloatArray, u: FloatArray
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Whether two planes (unit normals ``n_a``, ``n_b``, either sign; ``gap`` from ``a``'s
+    centroid to ``b``'s) meet at a convex edge, each centroid behind the other's plane as seen
+    along ``u``, or a concave one, each in front."""
+    facing_a = n_a * -np.sign(np.einsum("...i,...i->...", n_a, u))[..., None]
+    facing_b = n_b * -np.sign(np.einsum("...i,...i->...", n_b, u))[..., None]
+    behind_a = np.einsum("...i,...i->...", facing_a, gap) < 0  # b's centroid behind a's plane
+    behind_b = np.einsum("...i,...i->...", facing_b, gap) > 0
+    return np.asarray(behind_a & behind_b), np.asarray(~behind_a & ~behind_b)
+
+
+def line_sees(
+    diff: FloatArray, var: FloatArray, convex: NDArray[np.bool_], concave: NDArray[np.bool_]
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Which of two planes a line of sight sees, ``(sees_a, sees_b)``, from how much farther along
+    it plane ``a`` lies than ``b`` (``diff = delta_a - delta_b``) and that difference's variance
+    ``var``: across a convex edge the farther plane, across a concave one the nearer, and neither
+    when ``diff`` is within ``BESIDE_MAX_SIGMAS`` of its sigmas."""
+    clear = diff**2 > BESIDE_MAX_SIGMAS**2 * var
+    sees_a = clear & ((convex & (diff > 0)) | (concave & (diff < 0)))
+    sees_b = clear & ((convex & (diff < 0)) | (concave & (diff > 0)))
+    return np.asarray(sees_a), np.asarray(sees_b)
 
 
 @dataclass(frozen=True)
