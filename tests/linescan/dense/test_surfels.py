@@ -135,16 +135,21 @@ def _fold_height_m(x_m: np.ndarray) -> np.ndarray:
     return np.asarray(np.tan(np.radians(FOLD_ANGLE_DEG)) * (np.abs(phase) - FOLD_WIDTH_M / 2))
 
 
+def _fold_range_m(u: np.ndarray) -> np.ndarray:
+    """Range at which each unit direction ``u`` (n, 3) meets the folded wall."""
+    range_m = np.full(len(u), 50.0)
+    for _ in range(30):  # the ray meets z = 50 + height(x); a contraction (slope x 0.1)
+        range_m = (50.0 + _fold_height_m(range_m * u[:, 0])) / u[:, 2]
+    return range_m
+
+
 def _folded_wall(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Faces 2.4 m wide (8 cells of 0.3 m) folded at 45 deg edges, ridges and valleys in turn, at
     50 m (as the octagonal bus's sides): the points with Table 1 noise, their lines and the face
     each lies on."""
     az, el = np.meshgrid(np.radians(np.linspace(-6, 6, 400)), np.radians(np.linspace(-3, 3, 200)), indexing="ij")
     d = np.stack([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)], axis=-1).reshape(-1, 3)
-    range_m = np.full(len(d), 50.0)
-    for _ in range(30):  # the ray meets z = 50 + height(x); a contraction (slope x 0.1)
-        range_m = (50.0 + _fold_height_m(range_m * d[:, 0])) / d[:, 2]
-    clean = d * range_m[:, None]
+    clean = d * _fold_range_m(d)[:, None]
     face = np.floor((clean[:, 0] + FOLD_WIDTH_M / 2) / FOLD_WIDTH_M).astype(np.int64)
     tau = np.repeat(np.arange(400) * 1e-3, 200)
     return NOISE.sample(clean, np.random.default_rng(seed)), tau, face - face.min()
@@ -225,10 +230,7 @@ def test_points_handed_over_beside_ridges_and_valleys_are_not_sorted_by_their_no
         xyz = xyz[kept]
         # Each point's range error: its range less the wall's along its measured direction.
         u = xyz / np.linalg.norm(xyz, axis=1)[:, None]
-        range_m = np.full(len(u), 50.0)
-        for _ in range(30):
-            range_m = (50.0 + _fold_height_m(range_m * u[:, 0])) / u[:, 2]
-        e = (np.linalg.norm(xyz, axis=1) - range_m) / NOISE.range_sigma_m
+        e = (np.linalg.norm(xyz, axis=1) - _fold_range_m(u)) / NOISE.range_sigma_m
         edge_x = np.round((xyz[:, 0] - FOLD_WIDTH_M / 2) / FOLD_WIDTH_M) * FOLD_WIDTH_M + FOLD_WIDTH_M / 2
         ridge = _fold_height_m(edge_x) > 0
         moved = surf.point_cell != data.cell
