@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,28 @@ def scenario(seed: int, *, noise: bool, scene: Scene | None = None) -> tuple[Mot
     motion = random_motion(np.random.default_rng(seed))
     tracks, _ = simulate_tracks(motion, scene or Scene(noise=noise), seed=seed)
     return motion, tracks
+
+
+class ShapeCase(NamedTuple):
+    """One case of the line-scan benches on real shapes: a shape of ``bench.linescan.real_shapes``,
+    its range (m) and the motion's seed; ``str()`` gives it back as ``shape:range_m:seed``."""
+
+    name: str
+    distance_m: float
+    seed: int
+
+    def __str__(self) -> str:
+        return f"{self.name}:{self.distance_m:g}:{self.seed}"
+
+
+def shape_case(spec: str) -> ShapeCase:
+    """``shape:range_m:seed`` (``hubble:50:2``) as a :class:`ShapeCase`; an argparse ``type``, so
+    a malformed one is a usage error naming it."""
+    try:
+        name, distance, seed = spec.split(":")
+        return ShapeCase(name, float(distance), int(seed))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{spec!r} is not shape:range_m:seed (e.g. hubble:50:2)") from None
 
 
 def table(rows: Sequence[Sequence[object]], header: Sequence[str]) -> str:

@@ -22,7 +22,7 @@ from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.refine import refine_dense
 from tumblescan.target.motion import canonical_params
 
-from ..common import table
+from ..common import shape_case, table
 from .bias_map import in_bounds
 from .real_shapes import PARAMS, UNITS, estimated, shape_named
 from .truth import frames_at_truth
@@ -53,13 +53,12 @@ def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("cases", nargs="+", help="shape:range_m:seed, e.g. hubble:50:2")
+    parser.add_argument("cases", nargs="+", type=shape_case, help="shape:range_m:seed, e.g. hubble:50:2")
     parser.add_argument("--size", type=int, default=512, help="lines and pixels per frame")
     args = parser.parse_args()
     rows: list[list[object]] = []
-    for spec in args.cases:
-        name, distance, seed = spec.split(":")
-        rows += case(name, float(distance), int(seed), args.size)
+    for name, distance, seed in args.cases:
+        rows += case(name, distance, seed, args.size)
     print("error / dense bound per parameter")
     print(table(rows, ["case", "fit", *PARAMS]))
 

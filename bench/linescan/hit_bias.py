@@ -27,7 +27,7 @@ import numpy as np
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.surfels import normal_variance
 
-from ..common import grouped_bars, machine, out_dir, saved_figure, table
+from ..common import ShapeCase, grouped_bars, machine, out_dir, saved_figure, shape_case, table
 from .dense_bound import face_of_hits, majority_face
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
@@ -124,15 +124,20 @@ def case(name: str, distance_m: float, seed: int, draws: int) -> dict[str, float
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--cases", nargs="+", default=["box:50:2", "long-array:100:0"], help="shape:distance_m:seed")
+    parser.add_argument(
+        "--cases",
+        nargs="+",
+        type=shape_case,
+        default=[ShapeCase("box", 50, 2), ShapeCase("long-array", 100, 0)],
+        help="shape:range_m:seed",
+    )
     parser.add_argument("--draws", type=int, default=2, help="noise draws per case (seeds seed, seed + 1000, ...)")
     parser.add_argument("--stem", default="hit_bias")
     args = parser.parse_args()
     print(machine())
     results = {}
     for spec in args.cases:
-        name, distance, seed = spec.split(":")
-        results[spec] = case(name, float(distance), int(seed), args.draws)
+        results[str(spec)] = case(spec.name, spec.distance_m, spec.seed, args.draws)
         print(f"  {spec} done", flush=True)
     keys = list(next(iter(results.values())))
     print(f"\nAt the true motion, {args.draws} noise draws a case:")

@@ -3,7 +3,11 @@ and the bias statistics over draws."""
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
+import pytest
+from bench.common import ShapeCase, shape_case
 from bench.linescan.dense_bound import face_of_hits, last_stage_matches
 from bench.linescan.draw_bias import bias_table, subset_rows, surfel_roles
 from bench.linescan.reuse_diag import at_truth
@@ -53,3 +57,14 @@ def test_bias_table_reads_a_known_offset() -> None:
     assert 7 < out["bias_over_se"][1] < 13
     np.testing.assert_allclose(out["sd_over_bound"], [1.0, 2.0, 1.0], rtol=0.1)
     np.testing.assert_allclose(out["bias_over_bound"][1], 1.0, atol=0.3)
+
+
+def test_the_benches_read_a_case_as_shape_range_seed_and_name_a_malformed_one() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--cases", nargs="+", type=shape_case, default=[ShapeCase("box", 50, 14)])
+    assert parser.parse_args([]).cases == [ShapeCase("box", 50.0, 14)]
+    (case,) = parser.parse_args(["--cases", "long-array:100:31"]).cases
+    assert case == ShapeCase("long-array", 100.0, 31) and str(case) == "long-array:100:31"
+    for bad in ("hubble:fifty:2", "hubble:50", "hubble:50:2:1"):
+        with pytest.raises(argparse.ArgumentTypeError, match=f"'{bad}' is not shape:range_m:seed"):
+            shape_case(bad)
