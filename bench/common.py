@@ -51,6 +51,11 @@ def shape_case(spec: str) -> ShapeCase:
         raise argparse.ArgumentTypeError(f"{spec!r} is not shape:range_m:seed (e.g. hubble:50:2)") from None
 
 
+def add_cases(parser: argparse.ArgumentParser, *default: ShapeCase) -> None:
+    """A ``--cases shape:range_m:seed ...`` option (:func:`shape_case`), ``default`` when not given."""
+    parser.add_argument("--cases", nargs="+", type=shape_case, default=list(default), help="shape:range_m:seed")
+
+
 def table(rows: Sequence[Sequence[object]], header: Sequence[str]) -> str:
     cells = [[str(h) for h in header]] + [[_fmt(c) for c in r] for r in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]

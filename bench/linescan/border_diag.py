@@ -28,7 +28,7 @@ from tumblescan.linescan.dense.faces import NEIGHBOUR_OFFSETS, SIDE_NEIGHBOURS
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.sensor import SensorNoise, azimuth_elevation
 
-from ..common import ShapeCase, shape_case, table
+from ..common import ShapeCase, add_cases, table
 from .dense_bound import dense_bound, face_of_hits
 from .line_potential import PARAMS, flat_of_cells
 from .real_shapes import shape_named
@@ -118,13 +118,7 @@ def case(name: str, distance_m: float, seed: int, size: int) -> list[list[object
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument(
-        "--cases",
-        nargs="+",
-        type=shape_case,
-        default=[ShapeCase("long-array", 100, 3), ShapeCase("box", 100, 2)],
-        help="shape:range_m:seed",
-    )
+    add_cases(parser, ShapeCase("long-array", 100, 3), ShapeCase("box", 100, 2))
     parser.add_argument("--size", type=int, default=512)
     args = parser.parse_args()
     rows = []

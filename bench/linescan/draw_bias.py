@@ -40,7 +40,7 @@ from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.matching import CAUCHY_C, Matches
 from tumblescan.linescan.dense.surfels import Surfels
 
-from ..common import ShapeCase, machine, out_dir, shape_case, table
+from ..common import ShapeCase, add_cases, machine, out_dir, table
 from .bias_map import VARIANTS, variant_surfels
 from .dense_bound import bound_covariances, face_of_hits, last_stage_matches
 from .loss_choice import cauchy, newton_step, normalised
@@ -121,13 +121,7 @@ def case(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument(
-        "--cases",
-        nargs="+",
-        type=shape_case,
-        default=[ShapeCase("box", 50, 14), ShapeCase("long-array", 100, 31)],
-        help="shape:range_m:seed",
-    )
+    add_cases(parser, ShapeCase("box", 50, 14), ShapeCase("long-array", 100, 31))
     parser.add_argument("--draws", type=int, default=8)
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--variant", choices=VARIANTS, default="none", help="the surfels as bias_map's variant")

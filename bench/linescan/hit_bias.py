@@ -27,7 +27,7 @@ import numpy as np
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.surfels import normal_variance
 
-from ..common import ShapeCase, grouped_bars, machine, out_dir, saved_figure, shape_case, table
+from ..common import ShapeCase, add_cases, grouped_bars, machine, out_dir, saved_figure, table
 from .dense_bound import face_of_hits, majority_face
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
@@ -124,13 +124,7 @@ def case(name: str, distance_m: float, seed: int, draws: int) -> dict[str, float
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument(
-        "--cases",
-        nargs="+",
-        type=shape_case,
-        default=[ShapeCase("box", 50, 2), ShapeCase("long-array", 100, 0)],
-        help="shape:range_m:seed",
-    )
+    add_cases(parser, ShapeCase("box", 50, 2), ShapeCase("long-array", 100, 0))
     parser.add_argument("--draws", type=int, default=2, help="noise draws per case (seeds seed, seed + 1000, ...)")
     parser.add_argument("--stem", default="hit_bias")
     args = parser.parse_args()

@@ -24,7 +24,7 @@ from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense import faces as faces_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
 
-from ..common import ShapeCase, out_dir, shape_case, table
+from ..common import ShapeCase, add_cases, out_dir, table
 from .dense_bound import face_of_hits
 from .real_shapes import shape_named
 from .truth import frames_at_truth
@@ -77,9 +77,7 @@ def one_face(cell: np.ndarray, face: np.ndarray, m: int) -> np.ndarray:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("mode", choices=["capture", "rules"])
-    parser.add_argument(
-        "--cases", nargs="+", type=shape_case, default=[ShapeCase("octagon-truss", 50, 7)], help="shape:range_m:seed"
-    )
+    add_cases(parser, ShapeCase("octagon-truss", 50, 7))
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--tags", nargs="+", default=["off", "on"], help="rules: the captures to compare")
     parser.add_argument("--tag", default="on", help="capture: the pickles' tag (off: without the two rules)")

@@ -7,7 +7,7 @@ import argparse
 
 import numpy as np
 import pytest
-from bench.common import ShapeCase, shape_case
+from bench.common import ShapeCase, add_cases, shape_case
 from bench.linescan.dense_bound import face_of_hits, last_stage_matches
 from bench.linescan.draw_bias import bias_table, subset_rows, surfel_roles
 from bench.linescan.reuse_diag import at_truth
@@ -61,7 +61,7 @@ def test_bias_table_reads_a_known_offset() -> None:
 
 def test_the_benches_read_a_case_as_shape_range_seed_and_name_a_malformed_one() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--cases", nargs="+", type=shape_case, default=[ShapeCase("box", 50, 14)])
+    add_cases(parser, ShapeCase("box", 50, 14))
     assert parser.parse_args([]).cases == [ShapeCase("box", 50.0, 14)]
     (case,) = parser.parse_args(["--cases", "long-array:100:31"]).cases
     assert case == ShapeCase("long-array", 100.0, 31) and str(case) == "long-array:100:31"
