@@ -18,8 +18,9 @@ from scipy.spatial import cKDTree
 from ..._typing import FloatArray, IntArray
 from .faces import BESIDE_MAX_SIGMAS, CellPlanes, normal_tolerance
 
-# The pairs of a cell's 8 neighbours.
+# The pairs of a cell's 8 neighbours, and each pair's first and second neighbour as index arrays.
 NEIGHBOUR_PAIRS = tuple((a, b) for a in range(8) for b in range(a + 1, 8))
+PAIR_A, PAIR_B = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
 
 
 def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDArray[np.bool_]) -> IntArray:
@@ -95,8 +96,7 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     seen = valid[cf]
     # Where two of a cell's neighbours lie on different faces, its points' lines of sight decide
     # which they may lie on (a tenth to a half of the candidate cells' points).
-    pair_a, pair_b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
-    across = apart[:, pair_a, pair_b] & valid[:, pair_a] & valid[:, pair_b]  # (c, 28)
+    across = apart[:, PAIR_A, PAIR_B] & valid[:, PAIR_A] & valid[:, PAIR_B]  # (c, 28)
     e = np.flatnonzero(np.any(across, axis=1)[cf])
     if len(e):
         ce = cf[e]
@@ -200,7 +200,7 @@ def _edge_kinds(n_k: FloatArray, c_k: FloatArray, across: NDArray[np.bool_], u: 
     (``ce``: each line's cell)."""
     one = np.zeros(len(n_k), dtype=np.int64)
     one[ce] = np.arange(len(ce))
-    a, b = (np.array(side) for side in zip(*NEIGHBOUR_PAIRS, strict=True))
+    a, b = PAIR_A, PAIR_B
     convex, concave = edge_kind(n_k[:, a], n_k[:, b], c_k[:, b] - c_k[:, a], u[one][:, None, :])
     dot = np.einsum("cji,cji->cj", n_k[:, a], n_k[:, b])
     return EdgeKinds(across, convex, concave, dot)
