@@ -20,7 +20,9 @@ The pairs are read whole and by subset, each subset a Newton step of its own:
 - ``interior``: both surfels pure and their 8 view neighbours too, on the same face (away from
   every edge and outline);
 - ``no receivers``: neither surfel took points from a cell across an edge
-  (``handover.assign_to_faces``).
+  (``handover.assign_to_faces``);
+- ``all + left-out``: all pairs and the left-out hits' groups as the last stage adds them
+  (``grazing.find_grazing``, their variances at the pairs' robust scale; no thin members).
 
 ``--variant``: the surfels built as ``bias_map.py``'s variant of that name (``no-handover``: every
 point kept in its own cell).
@@ -36,9 +38,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tumblescan import Scanner, Scene, random_motion
+from tumblescan.linescan.dense.beams import Beams
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.matching import CAUCHY_C, Matches
 from tumblescan.linescan.dense.surfels import Surfels
+from tumblescan.linescan.dense.terms import Terms
 
 from ..common import ShapeCase, add_cases, machine, out_dir, table
 from .bias_map import VARIANTS, variant_surfels
@@ -46,7 +50,7 @@ from .dense_bound import bound_covariances, face_of_hits, last_stage_matches
 from .loss_choice import cauchy, newton_step, normalised
 from .real_shapes import shape_named
 
-SUBSETS = ("all", "pure", "interior", "no receivers")
+SUBSETS = ("all", "pure", "interior", "no receivers", "all + left-out")
 PARAM_NAMES = ("spin az", "spin pol", "spin rate", "prec az", "prec pol", "prec rate", "cx", "cy", "cz")
 
 
@@ -115,6 +119,10 @@ def case(
         e, s, Jn = normalised(lin)
         for label, rows in subset_rows(surfel_roles(data, surf, face), matches).items():
             steps[label].append(newton_step(e[rows], s, Jn[rows], loss))
+        terms = Terms(surf, matches, Beams.none()).with_grazing(data, scene.scanner.noise, mapping)
+        steps["all + left-out"].append(
+            newton_step(*normalised(terms.linearize(data, scene.scanner.noise, mapping)), loss)
+        )
     bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
     return {k: {q: v.tolist() for q, v in bias_table(np.array(st), bound_sd).items()} for k, st in steps.items()}
 

@@ -89,6 +89,17 @@ def find_grazing(
 ) -> Grazing:
     """The grazing groups at ``mapping`` (see the module). exclude: hits to leave out (the thin
     members' own)."""
+    h_all = grazing_candidates(data, surf, exclude=exclude)
+    if len(h_all) == 0 or not np.any(surf.planar):
+        return Grazing.none()
+    hit, target = match_to_surfels(data, mapping, surf, noise, h_all, max_cos=MAX_COS_INCIDENCE)
+    return group_hits(data, mapping, surf, hit, target)
+
+
+def grazing_candidates(data: DenseData, surf: Surfels, *, exclude: IntArray | None = None) -> IntArray:
+    """The hits tried (indices into the data's points): outside every planar surfel and off
+    ``exclude``, in cells the build handed none of to a planar neighbour, whose own normal looks
+    grazing (see the module)."""
     free = ~surf.planar[surf.point_cell]
     # Whole cells only: where the build handed some of a cell's points to a planar neighbour
     # (handover.assign_to_faces), the rest is what that selection left, not a fair sample.
@@ -102,13 +113,15 @@ def find_grazing(
     h_free = np.flatnonzero(free)
     xyz = data.xyz_m[h_free]
     own_cos = np.abs(np.einsum("ni,ni->n", xyz, surf.normal_obs[data.cell[h_free]]))
-    h_all = h_free[own_cos < CELL_MAX_COS * np.linalg.norm(xyz, axis=1)]
-    if len(h_all) == 0 or not np.any(surf.planar):
-        return Grazing.none()
-    hit, target = match_to_surfels(data, mapping, surf, noise, h_all, max_cos=MAX_COS_INCIDENCE)
+    return h_free[own_cos < CELL_MAX_COS * np.linalg.norm(xyz, axis=1)]
+
+
+def group_hits(data: DenseData, mapping: LineMapping, surf: Surfels, hit: IntArray, target: IntArray) -> Grazing:
+    """The matched hits ``(k,)`` (indices into the data's points) and their target surfels ``(k,)``
+    as groups, one per source cell and target: its hits' mean at ``T``, attached to their mean
+    line (see the module)."""
     if len(hit) == 0:
         return Grazing.none()
-    # One group per source cell and target: its hits' mean at T, attached to their mean line.
     _, first, group = np.unique(data.cell[hit] * len(surf.planar) + target, return_index=True, return_inverse=True)
     g = len(first)
     count, line = cell_lines(data.tau_s, data.line[hit], group, g)

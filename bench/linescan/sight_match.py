@@ -1,0 +1,256 @@
+"""The left-out hits matched where their line of sight meets a plane, against the fit's grazing
+groups: the Newton step from the truth over fresh noise draws.
+
+    python -m bench.linescan.sight_match [--cases long-array:100:14 dish-boom:100:5] [--draws 6]
+                                         [--stem NAME]
+
+The fit matches a left-out hit ``x`` at grazing incidence to the planar surfel whose anchor is
+nearest it (``grazing.match_to_surfels``). Range noise moves a hit along its sight ``u``, and so
+moves that match; where the sight meets a plane does not move. Here each left-out hit, in every
+other frame, takes the surfel nearest it within two surfel sizes as a first plane ``(n_0, a_0)``,
+the point where its sight meets that plane,
+
+    q = x - (n_0 . (x - a_0)) / (n_0 . u) u,
+
+and as its target the planar surfel nearest ``q`` within half a surfel size, kept when the plane
+faces its sensor and ``|r| <= 3 sqrt(var_x + v_t / N_t)`` as the fit keeps its own
+(:func:`match_by_sight`). The designs, each the surfel pairs of the last stage plus groups (one
+per source cell and target, their variances at the pairs' robust scale, as ``Terms.with_grazing``
+scales them):
+
+- ``pairs``: no groups;
+- ``grazing``: the fit's groups (``grazing.find_grazing``);
+- ``sight``: every left-out hit matched by its sight, at any incidence;
+- ``grazing + steep sight``: the fit's groups, and the hits matched by their sight where the plane
+  is met at ``|cos(incidence)| >= 0.3`` (a hit's grazing match in a frame kept first).
+
+As ``draw_bias.py`` does: one seeded motion of ``real_shapes``, simulated again with ``--draws``
+noise seeds (``seed + 1000 d``, ``d = 0 ..``), the Cauchy cost's optimum to first order, one
+Newton step from the truth; per rotation parameter, its mean over its standard error, and mean
+and spread over the dense bound's sigma. Also the matched hits against the mesh (each hit's face
+of the mesh and its target's majority face, ``dense_bound.face_of_hits``): the share on their
+target's face and the mean offset from that face's true plane over the hit's sigma along its
+normal, summed over the matches over ``sqrt(matches)`` (about 1 in size for a fair sample).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from tumblescan import Scanner, Scene, random_motion
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.grazing import (
+    GATE_SIGMAS,
+    MAX_COS_INCIDENCE,
+    Grazing,
+    grazing_candidates,
+    grazing_rows,
+    group_hits,
+    match_to_surfels,
+)
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, robust_sigma
+from tumblescan.linescan.dense.surfels import Surfels, normal_variance
+from tumblescan.linescan.sensor import SensorNoise
+
+from ..common import ShapeCase, add_cases, grouped_bars, machine, out_dir, saved_figure, table
+from .dense_bound import bound_covariances, face_of_hits, last_stage_matches, majority_face
+from .draw_bias import PARAM_NAMES, bias_table
+from .hit_bias import true_planes
+from .loss_choice import cauchy, newton_step, normalised
+from .real_shapes import shape_named
+from .reuse_diag import at_truth
+
+DESIGNS = ("pairs", "grazing", "sight", "grazing + steep sight")
+FIRST_REACH_SURFELS = 2.0
+TARGET_REACH_SURFELS = 0.5
+
+
+def match_by_sight(
+    data: DenseData,
+    mapping: LineMapping,
+    surf: Surfels,
+    noise: SensorNoise,
+    hits: np.ndarray,
+    *,
+    min_cos: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each of ``hits`` (indices into the data's points) matched, in every other frame, to the
+    planar surfel nearest where its sight meets a plane of that frame at ``T`` (see the module),
+    kept when that plane faces the hit's sensor at ``cos(incidence) >= min_cos`` and the hit lies
+    within ``GATE_SIGMAS`` of it: ``(k,)`` hits and ``(k,)`` their targets."""
+    x_ref = mapping.apply(data.xyz_m[hits], data.line[hits])
+    sight_ref = mapping.apply(np.zeros((len(hits), 3)), data.line[hits]) - x_ref
+    sight_ref /= np.maximum(np.linalg.norm(sight_ref, axis=1), 1e-300)[:, None]
+    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    for b in range(data.n_frames):
+        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        sel = np.flatnonzero(data.frame[hits] != b)
+        if len(in_b) == 0 or len(sel) == 0:
+            continue
+        tree = cKDTree(anchor_ref[in_b])
+        # A first plane: the surfel nearest the hit.
+        dist, nn = tree.query(x_ref[sel], k=1, distance_upper_bound=FIRST_REACH_SURFELS * data.surfel_m, workers=-1)
+        sel, first = sel[np.isfinite(dist)], in_b[nn[np.isfinite(dist)]]
+        # Where the sight meets it: a point the hit's range noise does not move.
+        u = sight_ref[sel]
+        cos0 = np.einsum("ni,ni->n", normal_ref[first], u)
+        steep = np.abs(cos0) > 1e-3
+        sel, first, u, cos0 = sel[steep], first[steep], u[steep], cos0[steep]
+        r0 = np.einsum("ni,ni->n", normal_ref[first], x_ref[sel] - anchor_ref[first])
+        q = x_ref[sel] - (r0 / cos0)[:, None] * u
+        # The target: the surfel nearest that point.
+        dist, nn = tree.query(q, k=1, distance_upper_bound=TARGET_REACH_SURFELS * data.surfel_m, workers=-1)
+        ok = np.isfinite(dist)
+        sel, t, u = sel[ok], in_b[nn[ok]], u[ok]
+        n = normal_ref[t]
+        r = np.einsum("ni,ni->n", n, x_ref[sel] - anchor_ref[t])
+        cos = np.einsum("ni,ni->n", n, u)
+        h = hits[sel]
+        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+        keep = (cos > 0) & (cos >= min_cos) & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        found.append(h[keep])
+        targets.append(t[keep])
+    return np.concatenate(found), np.concatenate(targets)
+
+
+def design_groups(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise
+) -> dict[str, tuple[Grazing, np.ndarray, np.ndarray]]:
+    """Each design's groups (see the module) and the hits and targets they were made of."""
+    left_out = np.flatnonzero(~surf.planar[surf.point_cell])
+    every_hit, every_target = match_by_sight(data, mapping, surf, noise, left_out)
+    # The fit's own: its candidates, matched its way (``find_grazing``'s groups).
+    g_hit, g_target = match_to_surfels(data, mapping, surf, noise, grazing_candidates(data, surf))
+    s_hit, s_target = match_by_sight(data, mapping, surf, noise, left_out, min_cos=MAX_COS_INCIDENCE)
+    fresh = ~np.isin(
+        s_hit * data.n_frames + data.cell_frame[s_target], g_hit * data.n_frames + data.cell_frame[g_target]
+    )
+    both_hit = np.concatenate([g_hit, s_hit[fresh]])
+    both_target = np.concatenate([g_target, s_target[fresh]])
+    empty = np.zeros(0, dtype=np.int64)
+    return {
+        "grazing": (group_hits(data, mapping, surf, g_hit, g_target), g_hit, g_target),
+        "sight": (group_hits(data, mapping, surf, every_hit, every_target), every_hit, every_target),
+        "grazing + steep sight": (group_hits(data, mapping, surf, both_hit, both_target), both_hit, both_target),
+        "pairs": (Grazing.none(), empty, empty),
+    }
+
+
+def with_groups(
+    pairs: Linearized, groups: Grazing, data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise
+) -> Linearized:
+    """The pairs' rows and the groups', the groups' variances at the pairs' robust scale."""
+    if groups.groups == 0:
+        return pairs
+    r, J, var = grazing_rows(groups, surf, mapping, noise)
+    assert J is not None
+    s_p, s_g = robust_sigma(pairs.r / np.sqrt(pairs.var)), robust_sigma(r / np.sqrt(var))
+    return Linearized(np.r_[pairs.r, r], np.vstack([pairs.J, J]), np.r_[pairs.var, var * (s_g / s_p) ** 2])
+
+
+def against_mesh(
+    hit: np.ndarray,
+    target: np.ndarray,
+    face: np.ndarray,
+    surf_face: np.ndarray,
+    data: DenseData,
+    mapping: LineMapping,
+    noise: SensorNoise,
+    planes: tuple[np.ndarray, np.ndarray],
+) -> tuple[float, float]:
+    """The share of the matches whose hit lies on its target's face, and the matches' offsets from
+    that face's true plane over their sigmas, summed over ``sqrt(matches)``."""
+    if len(hit) == 0:
+        return float("nan"), float("nan")
+    normals, offsets = planes
+    f = np.maximum(surf_face[target], 0)
+    n = normals[f]
+    x = mapping.apply(data.xyz_m[hit], data.line[hit])
+    var = normal_variance(noise, data.xyz_m[hit], np.einsum("nji,nj->ni", mapping.Rt[data.line[hit]], n))
+    z = (np.einsum("ni,ni->n", n, x) - offsets[f]) / np.sqrt(var)
+    same = (face[hit] >= 0) & (face[hit] == surf_face[target])
+    return float(same.mean()), float(z.sum() / np.sqrt(len(z)))
+
+
+def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
+    """Each design's bias readings over the draws, and its matches against the mesh (first draw)."""
+    motion = random_motion(np.random.default_rng(spec.seed), distance_m=spec.distance_m)
+    scene = Scene(scanner=Scanner(), shape=shape_named(spec.name))
+    noise, loss = scene.scanner.noise, cauchy(CAUCHY_C)
+    steps: dict[str, list[np.ndarray]] = {k: [] for k in DESIGNS}
+    out: dict[str, dict[str, list[float]]] = {}
+    for d in range(draws):
+        sim, data, mapping, surf = at_truth(motion, scene, spec.seed + 1000 * d)
+        _, pairs = last_stage_matches(data, mapping, surf, noise)
+        designs = design_groups(data, mapping, surf, noise)
+        if d == 0:
+            kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
+            face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
+            points_T = mapping.apply(sim.xyz_true_m[kept], data.line)
+            planes = true_planes(face, points_T, mapping.apply(np.zeros_like(points_T), data.line))
+            surf_face = majority_face(surf.point_cell, face, len(surf.planar))
+            for label, (groups, hit, target) in designs.items():
+                share, z_sum = against_mesh(hit, target, face, surf_face, data, mapping, noise, planes)
+                out[label] = {"hits": [float(groups.hits)], "on_target_face": [share], "offset_sum": [z_sum]}
+        for label, (groups, _, _) in designs.items():
+            lin = with_groups(pairs, groups, data, mapping, surf, noise)
+            steps[label].append(newton_step(*normalised(lin), loss))
+    bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
+    for label, st in steps.items():
+        out[label].update({q: v.tolist() for q, v in bias_table(np.array(st), bound_sd).items()})
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_cases(parser, ShapeCase("long-array", 100, 14), ShapeCase("dish-boom", 100, 5))
+    parser.add_argument("--draws", type=int, default=6)
+    parser.add_argument("--stem", default="sight_match")
+    args = parser.parse_args()
+    print(machine())
+    results = {}
+    for spec in args.cases:
+        results[str(spec)] = out = case(spec, args.draws)
+        print(f"\n{spec}, {args.draws} draws; rotation parameters only")
+        rows = [
+            [label, f"{r['hits'][0]:.0f}", f"{r['on_target_face'][0]:.3f}", f"{r['offset_sum'][0]:+.2f}"]
+            for label, r in out.items()
+        ]
+        print(table(rows, ["design", "hits (draw 0)", "on the target's face", "offset sum / sqrt(matches)"]))
+        rows = [
+            [label, quantity, *np.round(readings[quantity][:6], 2)]
+            for label, readings in out.items()
+            for quantity in ("bias_over_se", "bias_over_bound", "sd_over_bound")
+        ]
+        print(table(rows, ["design", "per parameter", *PARAM_NAMES[:6]]))
+    path = out_dir() / f"{args.stem}.json"
+    path.write_text(json.dumps(results, indent=1))
+    _plot(results, path.with_suffix(".png"))
+    print(f"wrote {path} and .png")
+
+
+def _plot(results: dict[str, dict[str, dict[str, list[float]]]], path: Path) -> None:
+    """Per case and design, the RMS over the rotation parameters of the bias and of the spread,
+    both over the bound: what a design moves the estimate by, and how much it scatters."""
+    cases = list(results)
+
+    def rms(case: str, design: str, quantity: str) -> float:
+        return float(np.sqrt(np.mean(np.square(results[case][design][quantity][:6]))))
+
+    series = {
+        f"{d}: {word}": [rms(c, d, quantity) for c in cases]
+        for d in DESIGNS
+        for word, quantity in (("spread", "sd_over_bound"), ("bias", "bias_over_bound"))
+    }
+    with saved_figure(
+        path, title="Newton step from the truth, by design", ylabel="RMS over the bound", legend_columns=2
+    ) as ax:
+        grouped_bars(ax, cases, series)
