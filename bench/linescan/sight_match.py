@@ -48,10 +48,12 @@ from tumblescan.linescan.dense.grazing import (
     GATE_SIGMAS,
     MAX_COS_INCIDENCE,
     Grazing,
+    at_reference,
     grazing_candidates,
     grazing_rows,
     group_hits,
     match_to_surfels,
+    other_frames,
 )
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, robust_sigma
@@ -84,17 +86,11 @@ def match_by_sight(
     planar surfel nearest where its sight meets a plane of that frame at ``T`` (see the module),
     kept when that plane faces the hit's sensor at ``cos(incidence) >= min_cos`` and the hit lies
     within ``GATE_SIGMAS`` of it: ``(k,)`` hits and ``(k,)`` their targets."""
-    x_ref = mapping.apply(data.xyz_m[hits], data.line[hits])
-    sight_ref = mapping.apply(np.zeros((len(hits), 3)), data.line[hits]) - x_ref
+    x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
+    sight_ref = sensor_ref - x_ref
     sight_ref /= np.maximum(np.linalg.norm(sight_ref, axis=1), 1e-300)[:, None]
-    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
-    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
     found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for b in range(data.n_frames):
-        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        sel = np.flatnonzero(data.frame[hits] != b)
-        if len(in_b) == 0 or len(sel) == 0:
-            continue
+    for sel, in_b in other_frames(data, surf, hits):
         tree = cKDTree(anchor_ref[in_b])
         # A first plane: the surfel nearest the hit.
         dist, nn = tree.query(x_ref[sel], k=1, distance_upper_bound=FIRST_REACH_SURFELS * data.surfel_m, workers=-1)

@@ -35,6 +35,7 @@ sigmas (the telescope at 50 m seed 8, which then failed the check; without them 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,16 +146,9 @@ def match_to_surfels(
     sensor (with ``|cos(incidence)|`` under ``max_cos``; None: at any incidence), the hit lies
     within ``MAX_INPLANE_SURFELS`` of its anchor along the plane and within ``GATE_SIGMAS`` of it
     across: ``(k,)`` hits and ``(k,)`` their target surfels, a hit once per frame it matched in."""
-    x_ref = mapping.apply(data.xyz_m[hits], data.line[hits])
-    sensor_ref = mapping.apply(np.zeros((len(hits), 3)), data.line[hits])
-    anchor_ref = mapping.apply(surf.anchor_obs, surf.line)
-    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
     found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for b in range(data.n_frames):
-        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
-        sel = np.flatnonzero(data.frame[hits] != b)
-        if len(in_b) == 0 or len(sel) == 0:
-            continue
+    for sel, in_b in other_frames(data, surf, hits):
         dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
         ok = np.isfinite(dist)
         sel, t = sel[ok], in_b[nn[ok]]
@@ -175,6 +169,26 @@ def match_to_surfels(
         found.append(h[keep])
         targets.append(t[keep])
     return np.concatenate(found), np.concatenate(targets)
+
+
+def at_reference(
+    data: DenseData, mapping: LineMapping, surf: Surfels, hits: IntArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """At ``T``: the ``hits`` ``(k, 3)``, their sensor ``(k, 3)``, every surfel's anchor ``(m, 3)``
+    and its unit normal ``(m, 3)`` (m)."""
+    x_ref = mapping.apply(data.xyz_m[hits], data.line[hits])
+    sensor_ref = mapping.apply(np.zeros((len(hits), 3)), data.line[hits])
+    return x_ref, sensor_ref, mapping.apply(surf.anchor_obs, surf.line), mapping.rotate(surf.normal_obs, surf.line)
+
+
+def other_frames(data: DenseData, surf: Surfels, hits: IntArray) -> Iterator[tuple[IntArray, IntArray]]:
+    """Per frame with planar surfels: the positions in ``hits`` of the hits of the other frames,
+    and that frame's planar surfels (skipping a frame where either is empty)."""
+    for b in range(data.n_frames):
+        in_b = np.flatnonzero((data.cell_frame == b) & surf.planar)
+        sel = np.flatnonzero(data.frame[hits] != b)
+        if len(in_b) and len(sel):
+            yield sel, in_b
 
 
 def grazing_rows(
