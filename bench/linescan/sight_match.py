@@ -43,6 +43,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from tumblescan import Scanner, Scene, random_motion
+from tumblescan.linescan.dense.beams import Beams
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import (
     GATE_SIGMAS,
@@ -50,14 +51,14 @@ from tumblescan.linescan.dense.grazing import (
     Grazing,
     at_reference,
     grazing_candidates,
-    grazing_rows,
     group_hits,
     match_to_surfels,
     other_frames,
 )
 from tumblescan.linescan.dense.mapping import LineMapping
-from tumblescan.linescan.dense.matching import CAUCHY_C, Linearized, robust_sigma
+from tumblescan.linescan.dense.matching import CAUCHY_C
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
+from tumblescan.linescan.dense.terms import Terms
 from tumblescan.linescan.sensor import SensorNoise
 
 from ..common import ShapeCase, add_cases, grouped_bars, machine, out_dir, saved_figure, table
@@ -133,23 +134,11 @@ def design_groups(
     both_target = np.concatenate([g_target, s_target[fresh]])
     empty = np.zeros(0, dtype=np.int64)
     return {
+        "pairs": (Grazing.none(), empty, empty),
         "grazing": (group_hits(data, mapping, surf, g_hit, g_target), g_hit, g_target),
         "sight": (group_hits(data, mapping, surf, every_hit, every_target), every_hit, every_target),
         "grazing + steep sight": (group_hits(data, mapping, surf, both_hit, both_target), both_hit, both_target),
-        "pairs": (Grazing.none(), empty, empty),
     }
-
-
-def with_groups(
-    pairs: Linearized, groups: Grazing, data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise
-) -> Linearized:
-    """The pairs' rows and the groups', the groups' variances at the pairs' robust scale."""
-    if groups.groups == 0:
-        return pairs
-    r, J, var = grazing_rows(groups, surf, mapping, noise)
-    assert J is not None
-    s_p, s_g = robust_sigma(pairs.r / np.sqrt(pairs.var)), robust_sigma(r / np.sqrt(var))
-    return Linearized(np.r_[pairs.r, r], np.vstack([pairs.J, J]), np.r_[pairs.var, var * (s_g / s_p) ** 2])
 
 
 def against_mesh(
@@ -185,7 +174,8 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
     out: dict[str, dict[str, list[float]]] = {}
     for d in range(draws):
         sim, data, mapping, surf = at_truth(motion, scene, spec.seed + 1000 * d)
-        _, pairs = last_stage_matches(data, mapping, surf, noise)
+        matches, _ = last_stage_matches(data, mapping, surf, noise)
+        pairs = Terms(surf, matches, Beams.none())
         designs = design_groups(data, mapping, surf, noise)
         if d == 0:
             kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
@@ -197,7 +187,7 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
                 share, z_sum = against_mesh(hit, target, face, surf_face, data, mapping, noise, planes)
                 out[label] = {"hits": [float(groups.hits)], "on_target_face": [share], "offset_sum": [z_sum]}
         for label, (groups, _, _) in designs.items():
-            lin = with_groups(pairs, groups, data, mapping, surf, noise)
+            lin = pairs.with_groups(groups, data, noise, mapping).linearize(data, noise, mapping)
             steps[label].append(newton_step(*normalised(lin), loss))
     bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
     for label, st in steps.items():

@@ -74,7 +74,12 @@ class Terms:
         """These terms with the grazing groups found at ``mapping`` (:func:`.grazing.find_grazing`),
         off the members' hits, their variances scaled so that their robust scale is the surfel
         pairs' (each kind of residual has its own misfit; one scale would weigh one by the other's)."""
-        groups = find_grazing(data, mapping, self.surf, noise, exclude=self.beams.point)
+        return self.with_groups(
+            find_grazing(data, mapping, self.surf, noise, exclude=self.beams.point), data, noise, mapping
+        )
+
+    def with_groups(self, groups: Grazing, data: DenseData, noise: SensorNoise, mapping: LineMapping) -> Terms:
+        """These terms with ``groups``, scaled at ``mapping`` as :meth:`with_grazing` scales its own."""
         if groups.groups == 0:
             return replace(self, grazing=groups, grazing_scale2=1.0)
         pairs = linearize(data, mapping, self.surf, self.matches, noise)
