@@ -1,5 +1,6 @@
-"""The left-out hits matched where their line of sight meets a plane, against the fit's grazing
-groups: the Newton step from the truth over fresh noise draws.
+"""Ways to match the hits the planar surfels leave out (where their line of sight meets a plane,
+and others), beside the fit's own grazing groups: the Newton step from the truth over fresh
+noise draws.
 
     python -m bench.linescan.sight_match [--cases long-array:100:14 dish-boom:100:5] [--draws 6]
                                          [--stem NAME]
@@ -20,9 +21,17 @@ scales them):
 
 - ``pairs``: no groups;
 - ``grazing``: the fit's groups (``grazing.find_grazing``);
+- ``grazing + members``: the fit's terms as its last stage has them, the thin members too
+  (``beams.find_beams``, their hits kept off the groups);
 - ``sight``: every left-out hit matched by its sight, at any incidence;
 - ``grazing + steep sight``: the fit's groups, and the hits matched by their sight where the plane
-  is met at ``|cos(incidence)| >= 0.3`` (a hit's grazing match in a frame kept first).
+  is met at ``|cos(incidence)| >= 0.3`` (a hit's grazing match in a frame kept first);
+- ``grazing + grazing cells``: the fit's groups, and its candidates matched as the fit matches
+  them but to the other frames' cells that hold candidates themselves (seen at grazing incidence,
+  not planar, :func:`match_to_grazing_cells`): the grazing hits that no planar surfel of another
+  frame holds;
+- ``candidates, any incidence``: the fit's candidates matched its way, but to planes met at any
+  incidence (``match_to_surfels`` with ``max_cos=None``).
 
 As ``draw_bias.py`` does: one seeded motion of ``real_shapes``, simulated again with ``--draws``
 noise seeds (``seed + 1000 d``, ``d = 0 ..``), the Cauchy cost's optimum to first order, one
@@ -30,24 +39,27 @@ Newton step from the truth; per rotation parameter, its mean over its standard e
 and spread over the dense bound's sigma. Also the matched hits against the mesh (each hit's face
 of the mesh and its target's majority face, ``dense_bound.face_of_hits``): the share on their
 target's face and the mean offset from that face's true plane over the hit's sigma along its
-normal, summed over the matches over ``sqrt(matches)`` (about 1 in size for a fair sample).
+normal, summed over the matches over ``sqrt(matches)`` (about 1 in size for a fair sample). And
+the seconds each design's matching took (draw by draw).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from tumblescan import Scanner, Scene, random_motion
-from tumblescan.linescan.dense.beams import Beams
+from tumblescan.linescan.dense.beams import Beams, find_beams
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import (
     GATE_SIGMAS,
     MAX_COS_INCIDENCE,
+    MAX_INPLANE_SURFELS,
     Grazing,
     at_reference,
     grazing_candidates,
@@ -69,9 +81,23 @@ from .loss_choice import cauchy, newton_step, normalised
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
 
-DESIGNS = ("pairs", "grazing", "sight", "grazing + steep sight")
+DESIGNS = (
+    "pairs",
+    "grazing",
+    "grazing + members",
+    "sight",
+    "grazing + steep sight",
+    "grazing + grazing cells",
+    "candidates, any incidence",
+)
 FIRST_REACH_SURFELS = 2.0
 TARGET_REACH_SURFELS = 0.5
+# The sights searched on meet their first plane at |cos(incidence)| at least this share of the
+# least kept: a target's plane differs from the first's only across an edge.
+PREFILTER_SHARE = 2 / 3
+# A grazing cell as a target: its points, and its normal within this of the hit's own cell's.
+MIN_TARGET_POINTS = 6
+MAX_TARGET_ANGLE_COS = np.cos(np.radians(20.0))
 
 
 def match_by_sight(
@@ -86,10 +112,13 @@ def match_by_sight(
     """Each of ``hits`` (indices into the data's points) matched, in every other frame, to the
     planar surfel nearest where its sight meets a plane of that frame at ``T`` (see the module),
     kept when that plane faces the hit's sensor at ``cos(incidence) >= min_cos`` and the hit lies
-    within ``GATE_SIGMAS`` of it: ``(k,)`` hits and ``(k,)`` their targets."""
+    within ``GATE_SIGMAS`` of it: ``(k,)`` hits and ``(k,)`` their targets. Sights meeting their
+    first plane below ``PREFILTER_SHARE * min_cos`` are not searched on (the same matches on the
+    cases measured, a third less time on the dish-boom)."""
     x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
     sight_ref = sensor_ref - x_ref
     sight_ref /= np.maximum(np.linalg.norm(sight_ref, axis=1), 1e-300)[:, None]
+    min_first = max(PREFILTER_SHARE * min_cos, 1e-3)
     found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     for sel, in_b in other_frames(data, surf, hits):
         tree = cKDTree(anchor_ref[in_b])
@@ -99,7 +128,7 @@ def match_by_sight(
         # Where the sight meets it: a point the hit's range noise does not move.
         u = sight_ref[sel]
         cos0 = np.einsum("ni,ni->n", normal_ref[first], u)
-        steep = np.abs(cos0) > 1e-3
+        steep = np.abs(cos0) >= min_first
         sel, first, u, cos0 = sel[steep], first[steep], u[steep], cos0[steep]
         r0 = np.einsum("ni,ni->n", normal_ref[first], x_ref[sel] - anchor_ref[first])
         q = x_ref[sel] - (r0 / cos0)[:, None] * u
@@ -119,26 +148,92 @@ def match_by_sight(
 
 
 def design_groups(
-    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise
-) -> dict[str, tuple[Grazing, np.ndarray, np.ndarray]]:
-    """Each design's groups (see the module) and the hits and targets they were made of."""
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, beams: Beams
+) -> tuple[dict[str, tuple[Grazing, np.ndarray, np.ndarray]], dict[str, float]]:
+    """Each design's groups (see the module) and the hits and targets they were made of; the
+    seconds each design's matching took beyond the fit's grazing groups."""
+    seconds: dict[str, float] = {}
     left_out = np.flatnonzero(~surf.planar[surf.point_cell])
     every_hit, every_target = match_by_sight(data, mapping, surf, noise, left_out)
     # The fit's own: its candidates, matched its way (``find_grazing``'s groups).
-    g_hit, g_target = match_to_surfels(data, mapping, surf, noise, grazing_candidates(data, surf))
+    start = time.perf_counter()
+    candidates = grazing_candidates(data, surf)
+    g_hit, g_target = match_to_surfels(data, mapping, surf, noise, candidates)
+    seconds["grazing"] = time.perf_counter() - start
+    # The fit's as its last stage has them: the members' hits kept off the groups.
+    m_hit, m_target = match_to_surfels(data, mapping, surf, noise, grazing_candidates(data, surf, exclude=beams.point))
+    start = time.perf_counter()
     s_hit, s_target = match_by_sight(data, mapping, surf, noise, left_out, min_cos=MAX_COS_INCIDENCE)
+    seconds["grazing + steep sight"] = time.perf_counter() - start
+    start = time.perf_counter()
+    c_hit, c_target = match_to_grazing_cells(data, mapping, surf, noise, candidates)
+    seconds["grazing + grazing cells"] = time.perf_counter() - start
+    a_hit, a_target = match_to_surfels(data, mapping, surf, noise, candidates, max_cos=None)
+    both = {
+        "candidates, any incidence": (a_hit, a_target),
+        "grazing + steep sight": _first_kept(data, g_hit, g_target, s_hit, s_target),
+        "grazing + grazing cells": _first_kept(data, g_hit, g_target, c_hit, c_target),
+    }
+    empty = np.zeros(0, dtype=np.int64)
+    out = {
+        "pairs": (Grazing.none(), empty, empty),
+        "grazing": (group_hits(data, mapping, surf, g_hit, g_target), g_hit, g_target),
+        "grazing + members": (group_hits(data, mapping, surf, m_hit, m_target), m_hit, m_target),
+        "sight": (group_hits(data, mapping, surf, every_hit, every_target), every_hit, every_target),
+    }
+    for label, (hit, target) in both.items():
+        out[label] = (group_hits(data, mapping, surf, hit, target), hit, target)
+    return out, seconds
+
+
+def match_to_grazing_cells(
+    data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, hits: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each of ``hits`` (grazing candidates) matched, in every other frame, to the nearest cell
+    of that frame that holds candidates itself (whole, not planar, seen at grazing incidence)
+    within a surfel size at ``T``, whose normal agrees with the hit's own cell's within 20 deg,
+    kept as ``match_to_surfels`` keeps its matches (facing, in-plane, gate)."""
+    m = len(surf.planar)
+    is_target = np.zeros(m, dtype=bool)
+    is_target[data.cell[hits]] = True
+    is_target &= surf.count >= MIN_TARGET_POINTS
+    x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
+    own_n = normal_ref[data.cell[hits]]
+    found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    for b in range(data.n_frames):
+        in_b = np.flatnonzero((data.cell_frame == b) & is_target)
+        sel = np.flatnonzero(data.frame[hits] != b)
+        if len(in_b) == 0 or len(sel) == 0:
+            continue
+        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
+        ok = np.isfinite(dist)
+        sel, t = sel[ok], in_b[nn[ok]]
+        n = normal_ref[t]
+        d = x_ref[sel] - anchor_ref[t]
+        r = np.einsum("ni,ni->n", n, d)
+        sight = sensor_ref[sel] - x_ref[sel]
+        cos = np.einsum("ni,ni->n", n, sight) / np.linalg.norm(sight, axis=1)
+        h = hits[sel]
+        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+        keep = (
+            (cos > 0)
+            & (np.abs(np.einsum("ni,ni->n", n, own_n[sel])) > MAX_TARGET_ANGLE_COS)
+            & (np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE_SURFELS * data.surfel_m) ** 2)
+            & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        )
+        found.append(h[keep])
+        targets.append(t[keep])
+    return np.concatenate(found), np.concatenate(targets)
+
+
+def _first_kept(
+    data: DenseData, g_hit: np.ndarray, g_target: np.ndarray, s_hit: np.ndarray, s_target: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grazing matches, then the sight's matches of (hit, frame) pairs they do not hold."""
     fresh = ~np.isin(
         s_hit * data.n_frames + data.cell_frame[s_target], g_hit * data.n_frames + data.cell_frame[g_target]
     )
-    both_hit = np.concatenate([g_hit, s_hit[fresh]])
-    both_target = np.concatenate([g_target, s_target[fresh]])
-    empty = np.zeros(0, dtype=np.int64)
-    return {
-        "pairs": (Grazing.none(), empty, empty),
-        "grazing": (group_hits(data, mapping, surf, g_hit, g_target), g_hit, g_target),
-        "sight": (group_hits(data, mapping, surf, every_hit, every_target), every_hit, every_target),
-        "grazing + steep sight": (group_hits(data, mapping, surf, both_hit, both_target), both_hit, both_target),
-    }
+    return np.concatenate([g_hit, s_hit[fresh]]), np.concatenate([g_target, s_target[fresh]])
 
 
 def against_mesh(
@@ -175,8 +270,9 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
     for d in range(draws):
         sim, data, mapping, surf = at_truth(motion, scene, spec.seed + 1000 * d)
         matches, _ = last_stage_matches(data, mapping, surf, noise)
-        pairs = Terms(surf, matches, Beams.none())
-        designs = design_groups(data, mapping, surf, noise)
+        beams = find_beams(data, mapping, surf, noise)
+        designs, seconds = design_groups(data, mapping, surf, noise, beams)
+        print(f"draw {d}: matching seconds " + ", ".join(f"{k} {v:.2f}" for k, v in seconds.items()), flush=True)
         if d == 0:
             kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
             face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
@@ -187,6 +283,7 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
                 share, z_sum = against_mesh(hit, target, face, surf_face, data, mapping, noise, planes)
                 out[label] = {"hits": [float(groups.hits)], "on_target_face": [share], "offset_sum": [z_sum]}
         for label, (groups, _, _) in designs.items():
+            pairs = Terms(surf, matches, beams if label == "grazing + members" else Beams.none())
             lin = pairs.with_groups(groups, data, noise, mapping).linearize(data, noise, mapping)
             steps[label].append(newton_step(*normalised(lin), loss))
     bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
@@ -240,3 +337,7 @@ def _plot(results: dict[str, dict[str, dict[str, list[float]]]], path: Path) -> 
         path, title="Newton step from the truth, by design", ylabel="RMS over the bound", legend_columns=2
     ) as ax:
         grouped_bars(ax, cases, series)
+
+
+if __name__ == "__main__":
+    main()

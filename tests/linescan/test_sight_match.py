@@ -12,8 +12,9 @@ from bench.linescan.reuse_diag import at_truth
 from bench.linescan.sight_match import design_groups, match_by_sight
 
 from tumblescan import Scanner, Scene
+from tumblescan.linescan.dense.beams import Beams
 from tumblescan.linescan.dense.data import DenseData
-from tumblescan.linescan.dense.grazing import match_to_surfels
+from tumblescan.linescan.dense.grazing import at_reference, match_to_surfels
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.surfels import Surfels
 from tumblescan.linescan.sensor import SensorNoise
@@ -54,8 +55,8 @@ def test_a_hit_moved_along_its_sight_keeps_its_target_by_sight_not_by_nearest_an
 
 def test_the_designs_groups_hold_their_matches(noise_free: Case) -> None:
     data, mapping, surf, noise = noise_free
-    designs = design_groups(data, mapping, surf, noise)
-    assert designs["pairs"][0].groups == 0
+    designs, seconds = design_groups(data, mapping, surf, noise, Beams.none())
+    assert designs["pairs"][0].groups == 0 and set(seconds) <= set(designs)
     for label in ("grazing", "sight", "grazing + steep sight"):
         groups, hit, target = designs[label]
         assert groups.groups > 100 and groups.hits == len(np.unique(hit))
@@ -68,3 +69,22 @@ def test_the_designs_groups_hold_their_matches(noise_free: Case) -> None:
     assert len(np.unique(keys)) == len(keys) > len(g_hit)
     # The sight design takes left-out hits at every incidence, more than the grazing ones.
     assert designs["sight"][0].hits > designs["grazing"][0].hits
+    # The grazing cells' design: the fit's matches first, then candidates' matches to cells that
+    # hold candidates themselves (none planar).
+    cells_hit, cells_target = designs["grazing + grazing cells"][1:]
+    np.testing.assert_array_equal(cells_hit[: len(g_hit)], g_hit)
+    extra = cells_target[len(g_hit) :]
+    assert len(extra) > 0 and not np.any(surf.planar[extra])
+
+
+def test_the_prefilter_keeps_the_sight_matches_at_steep_incidence(noise_free: Case) -> None:
+    data, mapping, surf, noise = noise_free
+    hits = np.flatnonzero(~surf.planar[surf.point_cell])
+    hit, target = match_by_sight(data, mapping, surf, noise, hits, min_cos=0.3)
+    every_hit, every_target = match_by_sight(data, mapping, surf, noise, hits)
+    x_ref, sensor_ref, _, normal_ref = at_reference(data, mapping, surf, every_hit)
+    u = sensor_ref - x_ref
+    steep = np.einsum("ni,ni->n", normal_ref[every_target], u) >= 0.3 * np.linalg.norm(u, axis=1)
+    kept = set(zip(hit.tolist(), target.tolist(), strict=True))
+    wanted = set(zip(every_hit[steep].tolist(), every_target[steep].tolist(), strict=True))
+    assert kept <= wanted and len(kept) > 0.99 * len(wanted) > 1000
