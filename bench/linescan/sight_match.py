@@ -48,6 +48,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +60,6 @@ from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import (
     GATE_SIGMAS,
     MAX_COS_INCIDENCE,
-    MAX_INPLANE_SURFELS,
     Grazing,
     at_reference,
     grazing_candidates,
@@ -192,38 +192,15 @@ def match_to_grazing_cells(
     """Each of ``hits`` (grazing candidates) matched, in every other frame, to the nearest cell
     of that frame that holds candidates itself (whole, not planar, seen at grazing incidence)
     within a surfel size at ``T``, whose normal agrees with the hit's own cell's within 20 deg,
-    kept as ``match_to_surfels`` keeps its matches (facing, in-plane, gate)."""
-    m = len(surf.planar)
-    is_target = np.zeros(m, dtype=bool)
+    kept as ``match_to_surfels`` keeps its matches at any incidence (facing, in-plane, gate)."""
+    is_target = np.zeros(len(surf.planar), dtype=bool)
     is_target[data.cell[hits]] = True
     is_target &= surf.count >= MIN_TARGET_POINTS
-    x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
-    own_n = normal_ref[data.cell[hits]]
-    found, targets = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for b in range(data.n_frames):
-        in_b = np.flatnonzero((data.cell_frame == b) & is_target)
-        sel = np.flatnonzero(data.frame[hits] != b)
-        if len(in_b) == 0 or len(sel) == 0:
-            continue
-        dist, nn = cKDTree(anchor_ref[in_b]).query(x_ref[sel], k=1, distance_upper_bound=data.surfel_m, workers=-1)
-        ok = np.isfinite(dist)
-        sel, t = sel[ok], in_b[nn[ok]]
-        n = normal_ref[t]
-        d = x_ref[sel] - anchor_ref[t]
-        r = np.einsum("ni,ni->n", n, d)
-        sight = sensor_ref[sel] - x_ref[sel]
-        cos = np.einsum("ni,ni->n", n, sight) / np.linalg.norm(sight, axis=1)
-        h = hits[sel]
-        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
-        keep = (
-            (cos > 0)
-            & (np.abs(np.einsum("ni,ni->n", n, own_n[sel])) > MAX_TARGET_ANGLE_COS)
-            & (np.einsum("ni,ni->n", d, d) - r**2 <= (MAX_INPLANE_SURFELS * data.surfel_m) ** 2)
-            & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
-        )
-        found.append(h[keep])
-        targets.append(t[keep])
-    return np.concatenate(found), np.concatenate(targets)
+    # The candidates' cells stand in for the planar surfels as targets.
+    hit, target = match_to_surfels(data, mapping, replace(surf, planar=is_target), noise, hits, max_cos=None)
+    normal_ref = mapping.rotate(surf.normal_obs, surf.line)
+    agree = np.abs(np.einsum("ni,ni->n", normal_ref[target], normal_ref[data.cell[hit]])) > MAX_TARGET_ANGLE_COS
+    return hit[agree], target[agree]
 
 
 def _first_kept(
