@@ -56,6 +56,16 @@ def add_cases(parser: argparse.ArgumentParser, *default: ShapeCase) -> None:
     parser.add_argument("--cases", nargs="+", type=shape_case, default=list(default), help="shape:range_m:seed")
 
 
+def draws_arguments(doc: str | None, *default: ShapeCase, draws: int, stem: str) -> argparse.Namespace:
+    """The command line of a bench that reads seeded cases over fresh noise draws: ``--cases``
+    (``default``), ``--draws`` and ``--stem`` (the name of its outputs in ``bench/out``)."""
+    parser = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_cases(parser, *default)
+    parser.add_argument("--draws", type=int, default=draws, help="noise draws per case")
+    parser.add_argument("--stem", default=stem)
+    return parser.parse_args()
+
+
 def table(rows: Sequence[Sequence[object]], header: Sequence[str]) -> str:
     cells = [[str(h) for h in header]] + [[_fmt(c) for c in r] for r in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]

@@ -45,7 +45,6 @@ the seconds each design's matching took (draw by draw).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from dataclasses import replace
@@ -73,7 +72,7 @@ from tumblescan.linescan.dense.surfels import Surfels, normal_variance
 from tumblescan.linescan.dense.terms import Terms
 from tumblescan.linescan.sensor import SensorNoise
 
-from ..common import ShapeCase, add_cases, grouped_bars, machine, out_dir, saved_figure, table
+from ..common import ShapeCase, draws_arguments, grouped_bars, machine, out_dir, saved_figure, table
 from .dense_bound import bound_covariances, face_of_hits, last_stage_matches, majority_face
 from .draw_bias import PARAM_NAMES, bias_table
 from .hit_bias import true_planes
@@ -270,11 +269,9 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_cases(parser, ShapeCase("long-array", 100, 14), ShapeCase("dish-boom", 100, 5))
-    parser.add_argument("--draws", type=int, default=6)
-    parser.add_argument("--stem", default="sight_match")
-    args = parser.parse_args()
+    args = draws_arguments(
+        __doc__, ShapeCase("long-array", 100, 14), ShapeCase("dish-boom", 100, 5), draws=6, stem="sight_match"
+    )
     print(machine())
     results = {}
     for spec in args.cases:
