@@ -150,7 +150,8 @@ def design_groups(
     data: DenseData, mapping: LineMapping, surf: Surfels, noise: SensorNoise, beams: Beams
 ) -> tuple[dict[str, tuple[Grazing, np.ndarray, np.ndarray]], dict[str, float]]:
     """Each design's groups (see the module) and the hits and targets they were made of; the
-    seconds each design's matching took beyond the fit's grazing groups."""
+    seconds the fit's grazing matching and each timed design's own matching took (a combined
+    design's time is its own matcher's, beyond the grazing matching it starts from)."""
     seconds: dict[str, float] = {}
     left_out = np.flatnonzero(~surf.planar[surf.point_cell])
     every_hit, every_target = match_by_sight(data, mapping, surf, noise, left_out)
