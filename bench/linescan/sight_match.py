@@ -31,7 +31,12 @@ scales them):
   not planar, :func:`match_to_grazing_cells`): the grazing hits that no planar surfel of another
   frame holds;
 - ``candidates, any incidence``: the fit's candidates matched its way, but to planes met at any
-  incidence (``match_to_surfels`` with ``max_cos=None``).
+  incidence (``match_to_surfels`` with ``max_cos=None``);
+- ``grazing + far steep sight``: as ``grazing + steep sight``, with the first plane within 4
+  surfel sizes and the target within 1 (``FAR``): the faces' margins, where the other frames hold
+  no planar surfel near the hit; the target's plane carried out to the hit with its tilt's
+  variance over the lever, and only hits whose own cell's normal is within 10 deg of the target's
+  (the next face's hits along an edge kept out).
 
 As ``draw_bias.py`` does: one seeded motion of ``real_shapes``, simulated again with ``--draws``
 noise seeds (``seed + 1000 d``, ``d = 0 ..``), the Cauchy cost's optimum to first order, one
@@ -47,7 +52,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -88,9 +93,24 @@ DESIGNS = (
     "grazing + steep sight",
     "grazing + grazing cells",
     "candidates, any incidence",
+    "grazing + far steep sight",
 )
-FIRST_REACH_SURFELS = 2.0
-TARGET_REACH_SURFELS = 0.5
+
+
+@dataclass(frozen=True)
+class SightReach:
+    """How far (in surfel sizes) a sight's first plane and its target are looked for. ``far``:
+    the target's plane is carried out to the hit (its tilt's variance over the lever in the
+    gate) and only hits whose own cell's normal is within ``agree_deg`` of the target's are kept."""
+
+    first_surfels: float = 2.0
+    target_surfels: float = 0.5
+    far: bool = False
+    agree_deg: float = 10.0
+
+
+# The faces' margins: where the other frames hold no planar surfel near the hit.
+FAR = SightReach(first_surfels=4.0, target_surfels=1.0, far=True)
 # The sights searched on meet their first plane at |cos(incidence)| at least this share of the
 # least kept: a target's plane differs from the first's only across an edge.
 PREFILTER_SHARE = 2 / 3
@@ -107,13 +127,15 @@ def match_by_sight(
     hits: np.ndarray,
     *,
     min_cos: float = 0.0,
+    reach: SightReach = SightReach(),
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each of ``hits`` (indices into the data's points) matched, in every other frame, to the
     planar surfel nearest where its sight meets a plane of that frame at ``T`` (see the module),
     kept when that plane faces the hit's sensor at ``cos(incidence) >= min_cos`` and the hit lies
     within ``GATE_SIGMAS`` of it: ``(k,)`` hits and ``(k,)`` their targets. Sights meeting their
     first plane below ``PREFILTER_SHARE * min_cos`` are not searched on (the same matches on the
-    cases measured, a third less time on the dish-boom)."""
+    cases measured, a third less time on the dish-boom). ``reach``: how far the first plane and
+    the target are looked for, and the far design's extra tests (:class:`SightReach`)."""
     x_ref, sensor_ref, anchor_ref, normal_ref = at_reference(data, mapping, surf, hits)
     sight_ref = sensor_ref - x_ref
     sight_ref /= np.maximum(np.linalg.norm(sight_ref, axis=1), 1e-300)[:, None]
@@ -122,7 +144,7 @@ def match_by_sight(
     for sel, in_b in other_frames(data, surf, hits):
         tree = cKDTree(anchor_ref[in_b])
         # A first plane: the surfel nearest the hit.
-        dist, nn = tree.query(x_ref[sel], k=1, distance_upper_bound=FIRST_REACH_SURFELS * data.surfel_m, workers=-1)
+        dist, nn = tree.query(x_ref[sel], k=1, distance_upper_bound=reach.first_surfels * data.surfel_m, workers=-1)
         sel, first = sel[np.isfinite(dist)], in_b[nn[np.isfinite(dist)]]
         # Where the sight meets it: a point the hit's range noise does not move.
         u = sight_ref[sel]
@@ -132,15 +154,25 @@ def match_by_sight(
         r0 = np.einsum("ni,ni->n", normal_ref[first], x_ref[sel] - anchor_ref[first])
         q = x_ref[sel] - (r0 / cos0)[:, None] * u
         # The target: the surfel nearest that point.
-        dist, nn = tree.query(q, k=1, distance_upper_bound=TARGET_REACH_SURFELS * data.surfel_m, workers=-1)
+        dist, nn = tree.query(q, k=1, distance_upper_bound=reach.target_surfels * data.surfel_m, workers=-1)
         ok = np.isfinite(dist)
         sel, t, u = sel[ok], in_b[nn[ok]], u[ok]
         n = normal_ref[t]
-        r = np.einsum("ni,ni->n", n, x_ref[sel] - anchor_ref[t])
+        d = x_ref[sel] - anchor_ref[t]
+        r = np.einsum("ni,ni->n", n, d)
         cos = np.einsum("ni,ni->n", n, u)
         h = hits[sel]
-        var_x = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
-        keep = (cos > 0) & (cos >= min_cos) & (r**2 <= GATE_SIGMAS**2 * (var_x + surf.var_m2[t] / surf.count[t]))
+        var = normal_variance(noise, data.xyz_m[h], np.einsum("nji,nj->ni", mapping.Rt[data.line[h]], n))
+        var += surf.var_m2[t] / surf.count[t]
+        keep = (cos > 0) & (cos >= min_cos)
+        if reach.far:
+            # The target's plane carried out to the hit: its tilt's variance over the lever (as
+            # the groups' rows carry it), and the hit's own cell of the target's direction, which
+            # keeps out the hits of the next face along an edge.
+            var += (np.einsum("ni,ni->n", d, d) - r**2) * surf.normal_var_rad2[t]
+            own = normal_ref[data.cell[h]]
+            keep &= np.abs(np.einsum("ni,ni->n", own, n)) > np.cos(np.radians(reach.agree_deg))
+        keep &= r**2 <= GATE_SIGMAS**2 * var
         found.append(h[keep])
         targets.append(t[keep])
     return np.concatenate(found), np.concatenate(targets)
@@ -166,12 +198,16 @@ def design_groups(
     s_hit, s_target = match_by_sight(data, mapping, surf, noise, left_out, min_cos=MAX_COS_INCIDENCE)
     seconds["grazing + steep sight"] = time.perf_counter() - start
     start = time.perf_counter()
+    f_hit, f_target = match_by_sight(data, mapping, surf, noise, left_out, min_cos=MAX_COS_INCIDENCE, reach=FAR)
+    seconds["grazing + far steep sight"] = time.perf_counter() - start
+    start = time.perf_counter()
     c_hit, c_target = match_to_grazing_cells(data, mapping, surf, noise, candidates)
     seconds["grazing + grazing cells"] = time.perf_counter() - start
     a_hit, a_target = match_to_surfels(data, mapping, surf, noise, candidates, max_cos=None)
     both = {
         "candidates, any incidence": (a_hit, a_target),
         "grazing + steep sight": _first_kept(data, g_hit, g_target, s_hit, s_target),
+        "grazing + far steep sight": _first_kept(data, g_hit, g_target, f_hit, f_target),
         "grazing + grazing cells": _first_kept(data, g_hit, g_target, c_hit, c_target),
     }
     empty = np.zeros(0, dtype=np.int64)
