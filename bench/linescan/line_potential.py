@@ -330,7 +330,7 @@ def range_step_sweep(name: str, distance_m: float, seed: int, size: int, steps: 
     share of hits in planar surfels at the true motion, their bound over the bound of all hits,
     and the share of them not on their surfel's main face (the bias the test is there to stop).
     (The branch ``wip-ls-line``'s commit 2abf78b adds ``4p``: the step and a test of the
-    neighbours on the cell's plane; docs/linescan.md.)"""
+    neighbours on the cell's plane; docs/linescan-rounds.md.)"""
     from tumblescan.linescan.dense import data as data_module
 
     motion, scene, sim, T = _simulated(name, distance_m, seed, size)

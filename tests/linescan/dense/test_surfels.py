@@ -322,7 +322,7 @@ def _plate(seed: int, tilt_deg: float, turn_deg: float) -> tuple[np.ndarray, np.
 def test_cells_reaching_over_a_panels_thin_edge_are_not_used(monkeypatch: pytest.MonkeyPatch) -> None:
     # The panel's 4 cm edge lies within 2 range sigmas of its face's plane: the cells along the
     # outline holding a few of its points pass every face test, and lean the same way in every
-    # frame (the octagon-truss's precession-rate bias, docs/linescan.md). The cells beside a
+    # frame (the octagon-truss's precession-rate bias, docs/linescan-rounds.md). The cells beside a
     # sliver of the outline, and their points, are left out: the edge's points in planar
     # surfels fall to under half, for a tenth of the points used.
     def strays_and_used() -> tuple[float, float]:

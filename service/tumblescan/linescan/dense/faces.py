@@ -91,7 +91,7 @@ def inside_face(
     cell keeps clear of its plane (by 2 noise sigmas and 6 deg of tilt over a cell). It took
     4-5 % more points on the real shapes, helped the truss and harmed the dish and the
     telescope, and on the 128-pixel box test it moved the spin rate by 4 sigmas: a one-sided
-    bias, as with the other ways of taking cells near edges in (docs/linescan.md)."""
+    bias, as with the other ways of taking cells near edges in (docs/linescan-rounds.md)."""
     nb = neighbours
     safe = np.where(nb >= 0, nb, 0)
     cos = np.einsum("ni,nki->nk", normal_obs, normal_obs[safe])
@@ -194,7 +194,7 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     A cell across an edge passes the face tests when the other face's points in it are few and
     lie within the noise of its plane (a panel's 4 cm edge at 2 range sigmas, the bus's 45 deg
     corners): they lean its normal and centroid the same way in every frame, and that bias, not
-    noise, put the truss's precession rate 3-5 sigmas off (docs/linescan.md). One statistic of
+    noise, put the truss's precession rate 3-5 sigmas off (docs/linescan-rounds.md). One statistic of
     its own points cannot see them (5-8 % of the points, within 2 sigmas). Where a cell inside
     the other face lies beside it, though, those points and the cell's own points near the edge
     lie on both planes: a cell reaching into that band may hold the other face's points, and is
@@ -209,7 +209,7 @@ def clear_of_other_faces(planes: CellPlanes, cells: NDArray[np.bool_], other: ND
     place of the points' offsets, leaving a cell out only when a point's line does not clearly
     see its own plane. It kept 0.3 % more cells (box and truss at 50 m, at the true motion) and
     was a little worse in the whole fit: RMS error / bound +0.03 on the dish-boom, the long
-    array and the truss, seeds 0-9 (docs/linescan.md, twelfth round)."""
+    array and the truss, seeds 0-9 (docs/linescan-rounds.md, twelfth round)."""
     neighbours, cell = planes.neighbours, planes.cell
     normal_ref, tilt_var_rad2 = planes.normal_ref, planes.tilt_var_rad2
     safe = np.where(neighbours >= 0, neighbours, 0)

@@ -44,7 +44,7 @@ def assign_to_faces(planes: CellPlanes, candidate: NDArray[np.bool_], face: NDAr
     face's plane too) kept the points whose noise put them off that plane: beside a ridge they
     lay 0.21 range sigmas nearer the sensor on average, beside a valley as far beyond
     (tests/linescan/dense/test_surfels.py), and the surfels that took them in were biased the
-    same way in every frame (docs/linescan.md, twelfth round).
+    same way in every frame (docs/linescan-rounds.md, twelfth round).
 
     So the points of either face of a cell that straddles an edge join their face's surfel,
     the band along the edge where the faces cannot be told apart stays out, and points on no
