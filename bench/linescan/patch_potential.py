@@ -285,8 +285,9 @@ class PatchFit:
 
 def gate_hits(fit: PatchFit, mapping: LineMapping, xyz_T: FloatArray, cube_m: float) -> Patches:
     """Every hit outside the planar surfels given the plane of its cube it lies on within
-    ``GATE_SIGMAS`` (the nearest in sigmas), then the patches with fewer than ``MIN_PATCH_POINTS``
-    hits dropped. xyz_T: ``(n, 3)`` every hit at ``T`` under ``mapping``, as the patches were cut."""
+    ``GATE_SIGMAS`` (the nearest in sigmas among those facing the hit's sensor), then the patches
+    with fewer than ``MIN_PATCH_POINTS`` hits dropped. xyz_T: ``(n, 3)`` every hit at ``T`` under
+    ``mapping``, as the patches were cut."""
     pt, data = fit.patches, fit.data
     idx = np.flatnonzero(pt.used)
     _, plane, _ = fit.planes(fit.hits(mapping, idx), np.ones(len(idx)))
@@ -300,9 +301,14 @@ def gate_hits(fit: PatchFit, mapping: LineMapping, xyz_T: FloatArray, cube_m: fl
     sorted_keys = patch_key[order]
     hit_key = cube[others]
     lo, hi = np.searchsorted(sorted_keys, hit_key, "left"), np.searchsorted(sorted_keys, hit_key, "right")
+    sensor_T = mapping.apply(np.zeros((len(others), 3)), data.line[others])
     for offset in range(int((hi - lo).max(initial=0))):
         ok = lo + offset < hi
         hits, k = others[ok], order[lo[ok] + offset]
+        # Only planes facing the hit's sensor: the back of a plate a few centimetres thick lies
+        # within the gate of a hit pushed back by its noise, and would take exactly those.
+        facing = np.einsum("ni,ni->n", pt.normal[k], sensor_T[ok] - xyz_T[hits]) > 0
+        hits, k = hits[facing], k[facing]
         d = xyz_T[hits] - pt.centre[k]
         u, v = np.einsum("ni,ni->n", d, pt.e1[k]), np.einsum("ni,ni->n", d, pt.e2[k])
         off = np.einsum("ni,ni->n", d, pt.normal[k]) - plane[k, 0] - plane[k, 1] * u - plane[k, 2] * v

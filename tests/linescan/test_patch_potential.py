@@ -6,10 +6,13 @@ from __future__ import annotations
 from functools import cache
 
 import numpy as np
-from bench.linescan.patch_potential import Patches, PatchFit, cut_patches, noise_product, plane_fit
+from bench.linescan.dense_bound import face_of_hits, majority_face
+from bench.linescan.patch_potential import Patches, PatchFit, cut_patches, gate_hits, noise_product, plane_fit
+from bench.linescan.real_shapes import shape_named
+from bench.linescan.reuse_diag import at_truth
 from bench.linescan.truth import dense_data
 
-from tumblescan import Scanner, Scene, simulate_frames
+from tumblescan import Scanner, Scene, random_motion, simulate_frames
 from tumblescan.geometry.rotations import axis_from_angles
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
@@ -102,3 +105,35 @@ def test_the_variance_gradient_is_the_variance_s_derivative() -> None:
         scale = np.max(np.abs(analytic))
         assert np.allclose(analytic[:, j], numeric, rtol=1e-4, atol=1e-5 * scale), j
     assert np.max(np.abs(analytic[:, :6])) > 0  # the turning parameters move it; the centre does not
+
+
+def test_the_gate_leaves_each_hit_on_a_plane_facing_its_sensor_so_a_plates_back_takes_none() -> None:
+    # The long array is a plate 5 cm thick: its back lies 2.5 range sigmas behind its front, so
+    # a front hit pushed back by its noise lay nearer the back's plane in sigmas and was gated
+    # there, then dropped with that patch's other face: the front kept a noise-selected sample
+    # (its hits' mean 0.04 sigma off the face, 10 standard errors, on this motion).
+    motion = random_motion(np.random.default_rng(3), distance_m=100.0)
+    scene = Scene(scanner=Scanner(), shape=shape_named("long-array"))
+    noise = scene.scanner.noise
+    sim, data, mapping, surf = at_truth(motion, scene, 1003)
+    xyz_T, true_T = mapping.apply(data.xyz_m, data.line), mapping.apply(sim.xyz_true_m, data.line)
+    planar = np.asarray(surf.planar[surf.point_cell])
+    cell_normal_T = np.einsum("nij,nj->ni", mapping.Rt[surf.line], surf.normal_obs)[surf.point_cell]
+    cube_m = 6.0 * data.surfel_m
+    patches = cut_patches(xyz_T, cell_normal_T, planar, cube_m)
+    gated = gate_hits(PatchFit(data, noise, patches, corrected=False), mapping, xyz_T, cube_m)
+    # Every hit on a plane that faces its sensor.
+    k = gated.patch[gated.used]
+    sight = mapping.apply(np.zeros((len(k), 3)), data.line[gated.used]) - xyz_T[gated.used]
+    assert np.all(np.einsum("ni,ni->n", gated.normal[k], sight) > 0)
+    # The array's faces keep a fair sample: the hits joined to a patch of their own face lie on
+    # it on average, within 4 standard errors.
+    face = face_of_hits(scene, motion, sim.reference_m)[0]
+    own = gated.used & (
+        face == majority_face(gated.patch[gated.used], face[gated.used], len(gated.centre))[np.maximum(gated.patch, 0)]
+    )
+    n = gated.normal[gated.patch[own]]
+    z = np.einsum("ni,ni->n", xyz_T[own] - true_T[own], n) / np.sqrt(
+        normal_variance(noise, data.xyz_m[own], np.einsum("nij,ni->nj", mapping.Rt[data.line[own]], n))
+    )
+    assert len(z) > 100_000 and abs(z.mean()) < 4 / np.sqrt(len(z))
