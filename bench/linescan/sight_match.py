@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tumblescan import Scanner, Scene, random_motion
+from tumblescan import Motion, Scanner, Scene, random_motion
 from tumblescan.linescan.dense.beams import Beams, find_beams
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import (
@@ -76,6 +76,7 @@ from tumblescan.linescan.dense.matching import CAUCHY_C
 from tumblescan.linescan.dense.surfels import Surfels, normal_variance
 from tumblescan.linescan.dense.terms import Terms
 from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.simulate import FrameCloud
 
 from ..common import ShapeCase, draws_arguments, grouped_bars, machine, out_dir, saved_figure, table
 from .dense_bound import bound_covariances, face_of_hits, last_stage_matches, majority_face
@@ -249,6 +250,18 @@ def _first_kept(
     return np.concatenate([g_hit, s_hit[fresh]]), np.concatenate([g_target, s_target[fresh]])
 
 
+def mesh_truth(
+    scene: Scene, motion: Motion, sim: FrameCloud, data: DenseData, mapping: LineMapping, surf: Surfels
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """What :func:`against_mesh` judges by: each kept hit's face of the mesh ``(n,)`` (-1: none),
+    each surfel's majority face ``(m,)`` and the faces' true planes at ``T``."""
+    kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
+    face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
+    points_T = mapping.apply(sim.xyz_true_m[kept], data.line)
+    planes = true_planes(face, points_T, mapping.apply(np.zeros_like(points_T), data.line))
+    return face, majority_face(surf.point_cell, face, len(surf.planar)), planes
+
+
 def against_mesh(
     hit: np.ndarray,
     target: np.ndarray,
@@ -287,11 +300,7 @@ def case(spec: ShapeCase, draws: int) -> dict[str, dict[str, list[float]]]:
         designs, seconds = design_groups(data, mapping, surf, noise, beams)
         print(f"draw {d}: matching seconds " + ", ".join(f"{k} {v:.2f}" for k, v in seconds.items()), flush=True)
         if d == 0:
-            kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
-            face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
-            points_T = mapping.apply(sim.xyz_true_m[kept], data.line)
-            planes = true_planes(face, points_T, mapping.apply(np.zeros_like(points_T), data.line))
-            surf_face = majority_face(surf.point_cell, face, len(surf.planar))
+            face, surf_face, planes = mesh_truth(scene, motion, sim, data, mapping, surf)
             for label, (groups, hit, target) in designs.items():
                 share, z_sum = against_mesh(hit, target, face, surf_face, data, mapping, noise, planes)
                 out[label] = {"hits": [float(groups.hits)], "on_target_face": [share], "offset_sum": [z_sum]}

@@ -8,18 +8,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from bench.linescan.dense_bound import face_of_hits, majority_face
-from bench.linescan.hit_bias import true_planes
 from bench.linescan.reuse_diag import at_truth
-from bench.linescan.sight_match import FAR, SightReach, against_mesh, design_groups, match_by_sight
+from bench.linescan.sight_match import FAR, SightReach, against_mesh, design_groups, match_by_sight, mesh_truth
 
-from tumblescan import Scanner, Scene
+from tumblescan import Motion, Scanner, Scene
 from tumblescan.linescan.dense.beams import Beams
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import at_reference, match_to_surfels
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.surfels import Surfels
 from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.simulate import FrameCloud
 
 from ..conftest import motion_for
 
@@ -28,9 +27,15 @@ Matcher = Callable[[DenseData, LineMapping, Surfels, SensorNoise, np.ndarray], t
 
 
 @pytest.fixture(scope="module")
-def noise_free() -> Case:
+def box_truth() -> tuple[Scene, Motion, FrameCloud, DenseData, LineMapping, Surfels]:
     scene = Scene(scanner=Scanner(lines=160, pixels=160), noise=False)
-    _, data, mapping, surf = at_truth(motion_for(1, distance_m=50.0), scene, 1)
+    motion = motion_for(1, distance_m=50.0)
+    return (scene, motion, *at_truth(motion, scene, 1))
+
+
+@pytest.fixture(scope="module")
+def noise_free(box_truth: tuple[Scene, Motion, FrameCloud, DenseData, LineMapping, Surfels]) -> Case:
+    scene, _, _, data, mapping, surf = box_truth
     return data, mapping, surf, scene.scanner.noise
 
 
@@ -92,17 +97,13 @@ def test_the_prefilter_keeps_the_sight_matches_at_steep_incidence(noise_free: Ca
     assert kept <= wanted and len(kept) > 0.99 * len(wanted) > 1000
 
 
-def test_the_far_sight_finds_the_faces_margins_and_keeps_the_next_face_out() -> None:
-    scene = Scene(scanner=Scanner(lines=160, pixels=160), noise=False)
-    motion = motion_for(1, distance_m=50.0)
-    sim, data, mapping, surf = at_truth(motion, scene, 1)
+def test_the_far_sight_finds_the_faces_margins_and_keeps_the_next_face_out(
+    box_truth: tuple[Scene, Motion, FrameCloud, DenseData, LineMapping, Surfels],
+) -> None:
+    scene, motion, sim, data, mapping, surf = box_truth
     noise = scene.scanner.noise
     hits = np.flatnonzero(~surf.planar[surf.point_cell])
-    kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
-    face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
-    points_T = mapping.apply(sim.xyz_true_m[kept], data.line)
-    planes = true_planes(face, points_T, mapping.apply(np.zeros_like(points_T), data.line))
-    surf_face = majority_face(surf.point_cell, face, len(surf.planar))
+    face, surf_face, planes = mesh_truth(scene, motion, sim, data, mapping, surf)
 
     def on_face(reach: SightReach) -> tuple[int, float]:
         hit, target = match_by_sight(data, mapping, surf, noise, hits, min_cos=0.3, reach=reach)
