@@ -211,3 +211,41 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     attempt = est._judged(setup, solve, 10)
     assert attempt.fit is fits and "reporting the spin-only model" in attempt.warnings[0]
     assert attempt.problem() is None and attempt.flaws() < doubted.flaws()
+
+
+def _judging_setup(monkeypatch: pytest.MonkeyPatch, scales: list[float]) -> tuple[Any, list[float]]:
+    """The real judgement (significant precession, so no spin-only refit) of starts whose fits have
+    residual ``scales`` in turn; every check passes, and the scale of each fit checked is recorded."""
+    checked: list[float] = []
+    monkeypatch.setattr(est, "precession_p_value", lambda x, cov: 0.0)
+
+    def validate(setup: Any, n2: int, fit: Any) -> Similarity:
+        checked.append(fit.scale)
+        return Similarity(True, 1.0, 3.0, "covariance")
+
+    monkeypatch.setattr(est, "_validate", validate)
+    script(monkeypatch, [(s, True, 0) for s in scales])
+    monkeypatch.setattr(est, "_judged", JUDGED)
+    setup = type("S", (Setup,), {"data": type("D", (), {"n_frames": 10})(), "noise": None})()
+    setup.opts = type("O", (), {"seed": 0, "model": "auto", "significance": 0.05, "dense": None})()
+    return setup, checked
+
+
+JUDGED = est._judged
+
+
+def test_a_poor_fit_is_not_checked_while_another_start_may_be_sound(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Seen on the long array at 100 m (seed 1): the vote's motion left residuals 22.8 times their
+    # size and its check cost 2.8 s of the job's 19 s before the consensus's sound motion.
+    setup, checked = _judging_setup(monkeypatch, [22.8, 1.0, 1.0])
+    best, warnings, attempts = est.best_attempt(setup, None, 7)  # type: ignore[arg-type]
+    assert attempts == 2 and checked == [1.0]
+    assert best.solve.path == "registration+consensus+dense" and best.check is not None and best.check.passed
+    assert "residuals 22.8 times their expected size" in warnings[-1]
+
+
+def test_when_every_fit_is_poor_each_is_checked_and_the_least_flawed_kept(monkeypatch: pytest.MonkeyPatch) -> None:
+    setup, checked = _judging_setup(monkeypatch, [8.0, 5.0, 20.0])
+    best, warnings, attempts = est.best_attempt(setup, None, 7)  # type: ignore[arg-type]
+    assert attempts == 3 and sorted(checked) == [5.0, 8.0, 20.0]
+    assert best.fit.scale == 5.0 and best.check is not None and "no start was sound" in warnings[-1]

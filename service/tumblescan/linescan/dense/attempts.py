@@ -2,14 +2,15 @@
 
 A start (a motion most registered pairs agree with) is re-timed and registered again, refined
 on every point (:mod:`.refine`), given the model choice (Wald test on the precession rate) and
-validated on the first frames. :func:`best_attempt` tries the vote on rotation angles, the
+validated on the first frames (a poor fit only if no start is sound: another start replaces it
+whatever its check says). :func:`best_attempt` tries the vote on rotation angles, the
 consensus over triplets of pairs and the swarm on the dense cost in turn, and keeps the first
 sound attempt or the least flawed one.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,6 +126,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
         (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
     best: Attempt | None = None
+    made_attempts: list[Attempt] = []
     tried: list[str] = []
     made = 0
     confirmed = False  # a second start led where a motion that failed the check only ended
@@ -157,6 +159,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
             tried.append(f"{path}: {exc}")
             continue
         attempt = _judged(setup, solve, n2)
+        made_attempts.append(attempt)
         ended_alike = best is not None and same_basin(attempt.fit.x, best.fit.x)
         confirmed = ended_alike and _check_only(attempt)
         if best is None or attempt.flaws() < best.flaws():
@@ -169,6 +172,9 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
         raise unmatched[0]  # from every start: the frames' surfaces, not the starts, are at fault
     if best is None:
         raise FramesUnusableError("the motion could not be estimated: " + "; ".join(tried), field="file")
+    if best.problem() is not None and any(a.check is None for a in made_attempts):
+        # No start was sound: the checks skipped on poor fits rank those as the others are ranked.
+        best = min((_checked(setup, a, n2) for a in made_attempts), key=Attempt.flaws)
     kept = list(best.warnings)
     if tried:
         outcome = "no start was sound" if best.problem() else "the motion comes from " + best.solve.path
@@ -210,12 +216,19 @@ def _judged(setup: Setup, solve: Solve, n2: int) -> Attempt:
             )
             warnings.append(doubt + ": reporting the spin-precession model")
             model_doubt = doubt
-    # 5. Validate: do the first n2 frames alone support the motion?
-    check = None
-    if n2 < setup.data.n_frames:
-        setup.progress("validating", 0.7)
-        check = _validate(setup, n2, fit)
-    return Attempt(solve, fit, check, warnings, model_doubt)
+    attempt = Attempt(solve, fit, None, warnings, model_doubt)
+    # 5. Validate: do the first n2 frames alone support the motion? Not yet for a poor fit, which
+    # another start replaces whatever the check says (2-3 s a start; best_attempt checks it later
+    # only if no start is sound).
+    return attempt if poor_fit(fit) is not None else _checked(setup, attempt, n2)
+
+
+def _checked(setup: Setup, attempt: Attempt, n2: int) -> Attempt:
+    """The attempt with its check on the first ``n2`` frames (none when they are all the frames)."""
+    if attempt.check is not None or n2 >= setup.data.n_frames:
+        return attempt
+    setup.progress("validating", 0.7)
+    return replace(attempt, check=_validate(setup, n2, attempt.fit))
 
 
 def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str) -> Solve:
