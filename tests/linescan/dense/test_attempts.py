@@ -20,6 +20,7 @@ class FakeFit:
     x: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0]))
     residuals: int = 1000
     cov: np.ndarray = field(default_factory=lambda: np.eye(9))
+    given_up: bool = False
 
 
 def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, int]]) -> list[str]:
