@@ -30,7 +30,7 @@ def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, in
     monkeypatch.setattr(est, "consensus_start", lambda *a: "consensus")
     monkeypatch.setattr(est, "_swarm", lambda *a: "swarm")
 
-    def solve(setup: Any, pairs: Any, start: str, *, path: str) -> Any:
+    def solve(setup: Any, pairs: Any, start: str, *, path: str, give_up: bool = True) -> Any:
         made.append(start)
         scale, _, unmatched = outcomes[len(made) - 1]
         rms = np.r_[np.full(unmatched, np.nan), np.full(10 - unmatched, 0.02)]
@@ -99,7 +99,7 @@ def scripted_starts(
         monkeypatch.setattr(est, attr, lambda *a, g=guess: est.Start(guess=g, inliers=np.ones(3, bool)))
     refined: list[np.ndarray] = []
 
-    def solve(setup: Any, pairs: Any, start: Any, *, path: str) -> Any:
+    def solve(setup: Any, pairs: Any, start: Any, *, path: str, give_up: bool = True) -> Any:
         name = next(k for k, v in begins.items() if v is start.guess.x)
         fit = FakeFit(scales[len(refined)], np.full(10, 0.02), ends[name])
         refined.append(start.guess.x)
@@ -160,11 +160,11 @@ def _unmatched_first(monkeypatch: pytest.MonkeyPatch, starts_unmatched: int) -> 
     made = script(monkeypatch, [(1.0, True, 0)] * 3)
     solve: Any = est._solve  # the scripted one
 
-    def unmatched(setup: Any, pairs: Any, start: str, *, path: str) -> Any:
+    def unmatched(setup: Any, pairs: Any, start: str, *, path: str, give_up: bool = True) -> Any:
         if len(made) < starts_unmatched:
             made.append(start)
             raise est.NoSurfacesError("no planar patch of one frame could be matched in another", field="file")
-        return solve(setup, pairs, start, path=path)
+        return solve(setup, pairs, start, path=path, give_up=give_up)
 
     monkeypatch.setattr(est, "_solve", unmatched)
     return made
@@ -214,6 +214,9 @@ def test_a_spin_only_refit_that_matches_nothing_leaves_the_fit_that_does(monkeyp
     assert attempt.problem() is None and attempt.flaws() < doubted.flaws()
 
 
+JUDGED = est._judged
+
+
 def _judging_setup(monkeypatch: pytest.MonkeyPatch, scales: list[float]) -> tuple[Any, list[float]]:
     """The real judgement (significant precession, so no spin-only refit) of starts whose fits have
     residual ``scales`` in turn; every check passes, and the scale of each fit checked is recorded."""
@@ -232,9 +235,6 @@ def _judging_setup(monkeypatch: pytest.MonkeyPatch, scales: list[float]) -> tupl
     return setup, checked
 
 
-JUDGED = est._judged
-
-
 def test_a_poor_fit_is_not_checked_while_another_start_may_be_sound(monkeypatch: pytest.MonkeyPatch) -> None:
     # Seen on the long array at 100 m (seed 1): the vote's motion left residuals 22.8 times their
     # size and its check cost 2.8 s of the job's 19 s before the consensus's sound motion.
@@ -250,3 +250,19 @@ def test_when_every_fit_is_poor_each_is_checked_and_the_least_flawed_kept(monkey
     best, warnings, attempts = est.best_attempt(setup, None, 7)  # type: ignore[arg-type]
     assert attempts == 3 and sorted(checked) == [5.0, 8.0, 20.0]
     assert best.fit.scale == 5.0 and best.check is not None and "no start was sound" in warnings[-1]
+
+
+def test_every_start_but_the_last_may_be_given_up_after_its_first_stage(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The last start is refined to the end, so that a job where no start is sound reports a whole
+    # refinement among its candidates.
+    script(monkeypatch, [(20.0, True, 0)] * 3)
+    scripted: Any = est._solve
+    flags: list[bool] = []
+
+    def solve(setup: Any, pairs: Any, start: str, *, path: str, give_up: bool) -> Any:
+        flags.append(give_up)
+        return scripted(setup, pairs, start, path=path, give_up=give_up)
+
+    monkeypatch.setattr(est, "_solve", solve)
+    est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
+    assert flags == [True, True, False]

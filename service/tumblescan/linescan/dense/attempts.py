@@ -37,7 +37,6 @@ POOR_SCALE = 3.0
 # long array at 100 m seed 1: 17.6 after the first stage, 22.8 after 9 s more; every sound
 # refinement of the real-shapes bench, 120 jobs, stood at 0.95-1.24 after it).
 GIVE_UP_SCALE = 3 * POOR_SCALE
-SWARM_PATH = "registration+swarm+dense"
 CHECK_FAILED = "the two-frame-count check failed"
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
 NOISE_FREE_RMS_M = 1e-7
@@ -129,7 +128,7 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
     starts = (
         (lambda: vote(global_pairs, mid), "registration+cone+dense"),
         (lambda: consensus_start(global_pairs, mid, seed), "registration+consensus+dense"),
-        (lambda: _swarm(setup, global_pairs), SWARM_PATH),
+        (lambda: _swarm(setup, global_pairs), "registration+swarm+dense"),
     )
     best: Attempt | None = None
     made_attempts: list[Attempt] = []
@@ -155,7 +154,8 @@ def best_attempt(setup: Setup, global_pairs: PairTransforms, n2: int) -> tuple[A
                 tried.append(f"{path}: starts where the motion above ended, not refined again")
                 confirmed = _check_only(best)
                 continue
-            solve = _solve(setup, global_pairs, start, path=path)
+            # The last start is refined to the end: if no start is sound, the least flawed is reported.
+            solve = _solve(setup, global_pairs, start, path=path, give_up=made < len(starts))
         except NoSurfacesError as exc:
             # From a wrong start no patch may land on another frame's: the next start may do.
             unmatched.append(exc)
@@ -237,8 +237,10 @@ def _checked(setup: Setup, attempt: Attempt, n2: int) -> Attempt:
     return replace(attempt, check=_validate(setup, n2, attempt.fit))
 
 
-def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str) -> Solve:
-    """From a motion most pairs agree with: re-time and register again, refine on every point."""
+def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str, give_up: bool) -> Solve:
+    """From a motion most pairs agree with: re-time and register again, refine on every point
+    (given up after the first stage of refinement, if ``give_up``, when that leaves the residuals
+    over ``GIVE_UP_SCALE`` times their size)."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
@@ -269,8 +271,7 @@ def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str) -> S
         noise=setup.noise,
         seed=opts.seed,
         on_iteration=on_step,
-        # The last start is refined to the end: if no start is sound, the least flawed is reported.
-        give_up_scale=None if path == SWARM_PATH else GIVE_UP_SCALE,
+        give_up_scale=GIVE_UP_SCALE if give_up else None,
     )
     if fit.residuals == 0:
         raise NoSurfacesError(
