@@ -1,7 +1,8 @@
 """Where a bias of the dense fit comes from: the step from the truth, per patch of the target.
 
     python -m bench.linescan.bias_map [--shape hubble] [--distance 50] [--seed 2] [--draws 6] [--top 8]
-                                      [--variant true-tube-normals|curvature-64|no-handover]
+                                      [--variant true-tube-normals|curvature-64|no-handover|
+                                                 noise-free-anchors]
 
 At the true motion, for several noise draws of one motion (noise seeds ``seed + 1000 k``): the
 surfels and the last stage's matches as the refinement builds them, and one Newton step of the
@@ -21,7 +22,10 @@ rate).
 printed): ``true-tube-normals`` (the telescope only) puts the tube's true normals (radial from its
 axis, at each anchor) in place of the pooled ones, an oracle of how much the normals' noise moves
 the fit; ``curvature-64`` fits the curvature to 64 neighbours within 4 surfels (32 within 2.5);
-``no-handover`` hands no points of the cells across edges to their faces' cells.
+``no-handover`` hands no points of the cells across edges to their faces' cells;
+``noise-free-anchors`` takes from each surfel's anchor its points' mean noise (the simulator's
+noise-free hits), so that what is left of a step is the surfels' geometry (which points, normals
+and partners they have), not the noise their anchors carry.
 
 Noise-free frames do not serve: the normals are taken from the scatter less the sensor noise's
 covariance (``surfels._noise_free_normals``), which a noise-free cell does not have; on the box
@@ -39,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from tumblescan import Motion, Scanner, Scene, random_motion
+from tumblescan._typing import FloatArray
 from tumblescan.linescan.dense import curvature as curvature_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
 from tumblescan.linescan.dense.covariance import cauchy_curvature, patches
@@ -46,6 +51,7 @@ from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
 from tumblescan.linescan.dense.matching import CAUCHY_C, cauchyweights
 from tumblescan.linescan.dense.surfels import Surfels, _facing_sensor
+from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.linescan.validation import canonical_cov
 from tumblescan.target.shapes import TelescopeShape
 
@@ -61,7 +67,7 @@ def in_bounds(x: np.ndarray, delta: np.ndarray, bound: dict[str, float]) -> np.n
     return np.array([s[p] / bound[f"{p}_{UNITS[p]}"] for p in PARAMS])
 
 
-VARIANTS = ("none", "true-tube-normals", "curvature-64", "no-handover")
+VARIANTS = ("none", "true-tube-normals", "curvature-64", "no-handover", "noise-free-anchors")
 Patches = dict[tuple[int, ...], tuple[np.ndarray, int, float, np.ndarray]]
 
 
@@ -93,9 +99,22 @@ def true_tube_normals(motion: Motion, scene: Scene, mapping: LineMapping, surf: 
     return replace(surf, normal_obs=np.where(tube[:, None], n_obs, surf.normal_obs))
 
 
+def anchor_noise_m(sim: FrameCloud, data: DenseData, surf: Surfels) -> FloatArray:
+    """The noise each surfel's anchor carries, ``(m, 3)`` (sensor frame, m): the mean over its
+    points of the simulator's noise (measured less noise-free hit). Points of one surfel lie within
+    a few lines, over which the target turns by far less than the noise."""
+    kept = slice(None) if data.kept is None else data.kept
+    noise_m = (sim.xyz_m - sim.xyz_true_m)[kept]
+    m = len(surf.planar)
+    count = np.maximum(np.bincount(surf.point_cell, minlength=m), 1)
+    return (
+        np.stack([np.bincount(surf.point_cell, noise_m[:, i], minlength=m) for i in range(3)], axis=1) / count[:, None]
+    )
+
+
 def variant_surfels(
     variant: str, motion: Motion, scene: Scene, noise_seed: int
-) -> tuple[Any, DenseData, LineMapping, Surfels]:
+) -> tuple[FrameCloud, DenseData, LineMapping, Surfels]:
     """The frames at the truth and their surfels, as the estimator builds them or with ``variant``."""
     if variant == "curvature-64":
         with _patched(curvature_mod, CURVATURE_NEIGHBOURS=64), _patched(surfels_mod, CURVATURE_RADIUS=4.0):
@@ -106,6 +125,8 @@ def variant_surfels(
     sim, data, mapping, surf = at_truth(motion, scene, noise_seed)
     if variant == "true-tube-normals":
         surf = true_tube_normals(motion, scene, mapping, surf, float(sim.t_s.min()))
+    if variant == "noise-free-anchors":
+        surf = replace(surf, anchor_obs=surf.anchor_obs - anchor_noise_m(sim, data, surf))
     return sim, data, mapping, surf
 
 

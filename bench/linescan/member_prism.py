@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from tumblescan import Scanner, Scene, random_motion
-from tumblescan.linescan.dense.beams import Beams, find_beams
+from tumblescan.linescan.dense.beams import Beams, find_beams, without_nuisances
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.grazing import find_grazing
 from tumblescan.linescan.dense.mapping import LineMapping
@@ -162,9 +162,8 @@ def prism_rows(
         r, var, Jn = prism.r, prism.var, prism.J_nuisance
         fits.append(PrismFit(len(s), len(r), prism.half_width_m, float(np.sqrt(np.mean(r**2 / var)))))
         J = mapping.normal_derivative(prism.normal, xyz[s][prism.kept], line[s][prism.kept])
-        Jw = Jn / var[:, None]
-        info = np.linalg.pinv(Jw.T @ Jn, rcond=1e-10, hermitian=True)
-        rows.append((r - Jn @ (info @ (Jw.T @ r)), J - Jn @ (info @ (Jw.T @ J)), var))
+        r_x, J_x = without_nuisances(Jn, 1.0 / var, r, J)
+        rows.append((r_x, J_x, var))
     if not rows:
         return Linearized(np.zeros(0), np.zeros((0, len(mapping.free))), np.zeros(0)), fits
     r_all, J_all, var_all = (np.concatenate(part) for part in zip(*rows, strict=True))

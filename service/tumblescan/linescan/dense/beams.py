@@ -237,14 +237,20 @@ def beam_rows(
     if J_x is not None:
         J_x[n:] = shrink(J_x[n:])
     for at in rows:
-        Jl = J_line[at]
-        Jw = Jl * w[at, None]
-        info = np.linalg.pinv(Jw.T @ Jl, rcond=1e-10, hermitian=True)
-        # Each row less the nuisances' share of it: J_line (J_line^T W J_line)^+ J_line^T W.
-        r[at] -= Jl @ (info @ (Jw.T @ r[at]))
-        if J_x is not None:
-            J_x[at] -= Jl @ (info @ (Jw.T @ J_x[at]))
+        if J_x is None:
+            (r[at],) = without_nuisances(J_line[at], w[at], r[at])
+        else:
+            r[at], J_x[at] = without_nuisances(J_line[at], w[at], r[at], J_x[at])
     return r, J_x, y
+
+
+def without_nuisances(J_nuisance: FloatArray, w: FloatArray, *rows: FloatArray) -> tuple[FloatArray, ...]:
+    """Each of ``rows`` (residuals ``(k,)`` or derivatives ``(k, p)``) less the share the
+    nuisances explain, ``a - J_n (J_n^T W J_n)^+ J_n^T W a`` (Kaufman's projection; ``J_nuisance``
+    ``(k, q)``, ``w`` the rows' weights ``(k,)``): what is left depends on the motion alone."""
+    Jw = J_nuisance * w[:, None]
+    info = np.linalg.pinv(Jw.T @ J_nuisance, rcond=1e-10, hermitian=True)
+    return tuple(a - J_nuisance @ (info @ (Jw.T @ a)) for a in rows)
 
 
 def _frame_shrink(beams: Beams, data: DenseData) -> Callable[[FloatArray], FloatArray]:

@@ -1,0 +1,57 @@
+"""The bias-map bench's surfel variants (``bench/linescan/bias_map.py``): the anchors with their
+points' noise taken out."""
+
+from __future__ import annotations
+
+import numpy as np
+from bench.linescan.bias_map import anchor_noise_m, variant_surfels
+
+from tumblescan import Scanner, Scene
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.surfels import Surfels
+from tumblescan.linescan.simulate import FrameCloud
+
+from ..conftest import motion_for
+
+
+def _offsets_from_true_planes(
+    anchors_obs: np.ndarray, sim: FrameCloud, data: DenseData, mapping: LineMapping, surf: Surfels, cells: np.ndarray
+) -> np.ndarray:
+    """Each surfel's anchor (mapped to ``T`` at the true motion) off the plane of its points'
+    noise-free hits at ``T`` (m), for ``cells``."""
+    kept = slice(None) if data.kept is None else data.kept
+    true_T = mapping.apply(sim.xyz_true_m[kept], data.line)
+    anchors_T = mapping.apply(anchors_obs[cells], surf.line[cells])
+    out = np.empty(len(cells))
+    for i, c in enumerate(cells):
+        p = true_T[surf.point_cell == c]
+        centre = p.mean(axis=0)
+        normal = np.linalg.eigh(np.cov((p - centre).T))[1][:, 0]
+        out[i] = (anchors_T[i] - centre) @ normal
+    return out
+
+
+def test_noise_free_anchors_lie_on_the_surface_and_the_noise_is_the_model_s() -> None:
+    motion = motion_for(1, distance_m=50.0)
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    sim, data, mapping, surf = variant_surfels("none", motion, scene, 1)
+    clean = variant_surfels("noise-free-anchors", motion, scene, 1)[3]
+    planar = np.flatnonzero(surf.planar)
+    assert len(planar) > 300
+    # What the variant takes out is the anchors' noise, of the size the surfels' model gives it
+    # along the normal (the sensor's variance over the point count): the covariance relies on it.
+    noise = anchor_noise_m(sim, data, surf)
+    np.testing.assert_allclose(surf.anchor_obs - clean.anchor_obs, noise)
+    sd_m = np.sqrt(surf.var_m2[planar] / surf.count[planar])
+    z = np.einsum("ni,ni->n", noise[planar], surf.normal_obs[planar]) / sd_m
+    assert 0.85 < np.sqrt(np.mean(z**2)) < 1.15
+    assert abs(np.mean(z)) < 0.15
+    # On the box's flat faces the anchors without it lie on their points' true plane; the
+    # measured ones lie off it by their noise.
+    sample = planar[:: max(1, len(planar) // 300)]
+    sd_sample = np.sqrt(surf.var_m2[sample] / surf.count[sample])
+    off_clean = _offsets_from_true_planes(clean.anchor_obs, sim, data, mapping, surf, sample) / sd_sample
+    off_noisy = _offsets_from_true_planes(surf.anchor_obs, sim, data, mapping, surf, sample) / sd_sample
+    assert np.median(np.abs(off_clean)) < 0.05
+    assert 0.4 < np.median(np.abs(off_noisy)) < 1.0
