@@ -25,14 +25,18 @@ The pairs are read whole and by subset, each subset a Newton step of its own:
   (``grazing.find_grazing``, their variances at the pairs' robust scale; no thin members).
 
 ``--variant``: the surfels built as ``bias_map.py``'s variant of that name (``no-handover``: every
-point kept in its own cell).
+point kept in its own cell). With ``noise-free-anchors`` (each anchor less its points' mean
+noise) a step is the first-order bias of the surfels' geometry (their points, normals and
+partners) in that draw, with a spread of its own far below the noise's: the pairs are weighed at
+the measured anchors' robust scale (:func:`measured_scale`), and ``all + left-out`` is not read
+(the groups' hits keep their noise).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,12 +44,15 @@ from numpy.typing import NDArray
 from tumblescan import Scanner, Scene, random_motion
 from tumblescan.linescan.dense.beams import Beams
 from tumblescan.linescan.dense.data import DenseData
-from tumblescan.linescan.dense.matching import CAUCHY_C, Matches
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.matching import CAUCHY_C, Matches, linearize
 from tumblescan.linescan.dense.surfels import Surfels
 from tumblescan.linescan.dense.terms import Terms
+from tumblescan.linescan.sensor import SensorNoise
+from tumblescan.linescan.simulate import FrameCloud
 
 from ..common import ShapeCase, add_cases, machine, out_dir, table
-from .bias_map import VARIANTS, variant_surfels
+from .bias_map import VARIANTS, anchor_noise_m, variant_surfels
 from .dense_bound import bound_covariances, face_of_hits, last_stage_matches
 from .loss_choice import cauchy, newton_step, normalised
 from .real_shapes import shape_named
@@ -117,14 +124,29 @@ def case(
         face = face_of_hits(scene, motion, sim.reference_m)[0][kept]
         matches, lin = last_stage_matches(data, mapping, surf, scene.scanner.noise)
         e, s, Jn = normalised(lin)
+        if variant == "noise-free-anchors":
+            s = measured_scale(sim, data, mapping, surf, matches, scene.scanner.noise)
         for label, rows in subset_rows(surfel_roles(data, surf, face), matches).items():
             steps[label].append(newton_step(e[rows], s, Jn[rows], loss))
+        if variant == "noise-free-anchors":
+            continue  # the groups' hits keep their noise, and their variances follow the pairs' scale
         terms = Terms(surf, matches, Beams.none()).with_grazing(data, scene.scanner.noise, mapping)
         steps["all + left-out"].append(
             newton_step(*normalised(terms.linearize(data, scene.scanner.noise, mapping)), loss)
         )
     bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
-    return {k: {q: v.tolist() for q, v in bias_table(np.array(st), bound_sd).items()} for k, st in steps.items()}
+    return {k: {q: v.tolist() for q, v in bias_table(np.array(st), bound_sd).items()} for k, st in steps.items() if st}
+
+
+def measured_scale(
+    sim: FrameCloud, data: DenseData, mapping: LineMapping, clean: Surfels, matches: Matches, noise: SensorNoise
+) -> float:
+    """The robust scale of the pairs' normalised residuals with the anchors as measured, for
+    ``clean`` surfels whose anchors had their noise taken out (``bias_map``'s variant). Their
+    residuals are the surfels' misfit alone, which the fit weighs at the noise's scale: at their
+    own, far smaller scale the Cauchy loss would take the misfit for outliers and understate it."""
+    measured = replace(clean, anchor_obs=clean.anchor_obs + anchor_noise_m(sim, data, clean))
+    return normalised(linearize(data, mapping, measured, matches, noise))[1]
 
 
 def main() -> None:

@@ -4,11 +4,16 @@ points' noise taken out."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from bench.linescan.bias_map import anchor_noise_m, variant_surfels
+from bench.linescan.dense_bound import last_stage_matches
+from bench.linescan.draw_bias import measured_scale
+from bench.linescan.loss_choice import normalised
 
 from tumblescan import Scanner, Scene
 from tumblescan.linescan.dense.data import DenseData
 from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.matching import linearize
 from tumblescan.linescan.dense.surfels import Surfels
 from tumblescan.linescan.simulate import FrameCloud
 
@@ -55,3 +60,18 @@ def test_noise_free_anchors_lie_on_the_surface_and_the_noise_is_the_model_s() ->
     off_noisy = _offsets_from_true_planes(surf.anchor_obs, sim, data, mapping, surf, sample) / sd_sample
     assert np.median(np.abs(off_clean)) < 0.05
     assert 0.4 < np.median(np.abs(off_noisy)) < 1.0
+
+
+def test_the_clean_anchors_pairs_are_weighed_at_the_measured_scale() -> None:
+    motion = motion_for(1, distance_m=50.0)
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    noise = scene.scanner.noise
+    sim, data, mapping, clean = variant_surfels("noise-free-anchors", motion, scene, 1)
+    measured = variant_surfels("none", motion, scene, 1)[3]
+    matches, lin_clean = last_stage_matches(data, mapping, clean, noise)
+    # The measured anchors' residuals are about as large as the noise model says; the clean
+    # anchors' are the surfels' misfit alone, far smaller, and are weighed at the former's scale.
+    s_measured = normalised(linearize(data, mapping, measured, matches, noise))[1]
+    assert 0.85 < s_measured < 1.3
+    assert normalised(lin_clean)[1] < 0.3 * s_measured
+    assert measured_scale(sim, data, mapping, clean, matches, noise) == pytest.approx(s_measured, rel=1e-9)
