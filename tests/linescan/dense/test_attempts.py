@@ -266,3 +266,26 @@ def test_every_start_but_the_last_may_be_given_up_after_its_first_stage(monkeypa
     monkeypatch.setattr(est, "_solve", solve)
     est.best_attempt(Setup(), None, 7)  # type: ignore[arg-type]
     assert flags == [True, True, False]
+
+
+@pytest.mark.parametrize("give_up", [True, False])
+def test_the_spin_only_refit_may_be_given_up_as_its_start_may(monkeypatch: pytest.MonkeyPatch, give_up: bool) -> None:
+    # Seen on the long array at 100 m seed 1 from another motion's turns: the vote's refinement
+    # was given up after its first stage, and the spin-only refit from the same start ran all three
+    # at 32-37 times its residuals' size (7 s) before the next start.
+    full = FakeFit(30.0, np.full(10, 0.02), given_up=True)
+    asked: list[object] = []
+
+    def refit(*args: Any, **kwargs: Any) -> FakeFit:
+        asked.append(kwargs.get("give_up_scale"))
+        return FakeFit(31.9, np.full(10, 0.02), given_up=give_up)
+
+    monkeypatch.setattr(est, "precession_p_value", lambda x, cov: 0.99)
+    monkeypatch.setattr(est, "refine_dense", refit)
+    setup = type("S", (Setup,), {"data": type("D", (), {"n_frames": 10})(), "noise": None})()
+    setup.opts = type("O", (), {"seed": 0, "model": "auto", "significance": 0.05, "dense": None})()
+    initial = type("G", (), {"x_spin_only": full.x})()
+    solve = est.Solve(full, initial, 10, 10, "registration+cone+dense", give_up=give_up)  # type: ignore[arg-type]
+    attempt = est._judged(setup, solve, 10)
+    assert asked == [est.GIVE_UP_SCALE if give_up else None]
+    assert attempt.problem() is not None and "residuals" in attempt.problem()  # type: ignore[operator]

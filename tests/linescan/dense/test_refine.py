@@ -5,7 +5,7 @@ steps passed for convergence 10 bounds off the optimum; convergence is now judge
 Gauss-Newton step. On another CPU (other rounding in the BLAS) every start then crept along the
 valley and ended 29 deg off: the steps are now taken in the rotation vectors, where the valley is
 straight (``step_coords``, tests/linescan/dense/test_step_coords.py). And a start in another basin is
-given up after the first stage when another start remains."""
+given up after the first or second stage when another start remains."""
 
 from __future__ import annotations
 
@@ -14,9 +14,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from bench.linescan.dense import errors
+from bench.linescan.reuse_diag import at_truth
 
 from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
-from tumblescan.linescan.dense import attempts
+from tumblescan.linescan.dense import attempts, refine
 from tumblescan.linescan.dense.registration import PairTransforms
 from tumblescan.linescan.dense.starts import Start
 from tumblescan.linescan.frames import assemble_frames
@@ -68,3 +69,36 @@ def test_a_start_in_another_basin_is_given_up_after_the_first_stage(monkeypatch:
     assert e["spin_rate_deg_s"] <= 0.05 and e["precession_rate_deg_s"] <= 0.05, e
     for p in ("spin_axis", "spin_rate", "precession_axis", "precession_rate"):
         assert e[f"{p}_sigma"] <= 3, (p, e)
+
+
+@pytest.mark.parametrize(
+    ("scales", "give_up_scale", "stages_run", "given_up"),
+    [
+        ([20.0, 1.0, 1.0], 9.0, 1, 1),
+        # A start that matched next to nothing in the first stage (scale 0) and shows in the second.
+        ([0.0, 32.1, 7.2], 9.0, 2, 2),
+        # The last stage is never given up: its fit is the refinement's.
+        ([1.0, 1.0, 20.0], 9.0, 3, 0),
+        ([20.0, 32.1, 36.7], None, 3, 0),
+    ],
+)
+def test_a_refinement_is_given_up_after_any_stage_but_the_last(
+    monkeypatch: pytest.MonkeyPatch, scales: list[float], give_up_scale: float | None, stages_run: int, given_up: int
+) -> None:
+    """Each stage's residual scale replaced by ``scales``: the refinement stops after the first
+    stage over ``give_up_scale`` but the last, and says after which."""
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    _, data, mapping, _ = at_truth(random_motion(np.random.default_rng(1), distance_m=50.0), scene, 1)
+    iterate, ran = refine._iterate, list[float]()
+
+    def scripted(*args: object, **kwargs: object) -> tuple[object, ...]:
+        out = iterate(*args, **kwargs)  # type: ignore[arg-type]
+        ran.append(scales[len(ran)])
+        return (*out[:-1], ran[-1])
+
+    monkeypatch.setattr(refine, "_iterate", scripted)
+    fit = refine.refine_dense(data, mapping.x, noise=scene.scanner.noise, give_up_scale=give_up_scale)
+    assert len(ran) == stages_run and fit.given_up == given_up
+    if given_up:
+        why = attempts.poor_fit(replace(fit, scale=scales[given_up - 1]))
+        assert why is not None and f"after the {('first', 'second')[given_up - 1]} stage of refinement" in why

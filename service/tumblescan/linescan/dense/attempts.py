@@ -32,10 +32,11 @@ from .starts import Start, consensus_start, registration_start, retimed, same_ba
 RETIME_PASSES = 2
 # A refined motion whose residuals are this many times their model sigma is wrong.
 POOR_SCALE = 3.0
-# A start whose first stage of refinement leaves its residuals this many times their model sigma
-# is given up there when another start remains: the later stages do not leave its basin (the
-# long array at 100 m seed 1: 17.6 after the first stage, 22.8 after 9 s more; every sound
-# refinement of the real-shapes bench, 120 jobs, stood at 0.95-1.24 after it).
+# A start whose first or second stage of refinement leaves its residuals this many times their
+# model sigma is given up there when another start remains: the later stages do not leave its
+# basin (the long array at 100 m seed 1: 17.6 after the first stage, 22.8 after 9 s more; every
+# sound refinement of the real-shapes bench, 120 jobs, stood at 0.95-1.24 after the first stage
+# and 0.37-1.03 after the second: bench.linescan.stage_scales).
 GIVE_UP_SCALE = 3 * POOR_SCALE
 CHECK_FAILED = "the two-frame-count check failed"
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
@@ -77,6 +78,7 @@ class Solve:
     pairs_used: int
     pairs_total: int
     path: str
+    give_up: bool = False  # another start remains: a refinement may be given up (``GIVE_UP_SCALE``)
 
 
 @dataclass(frozen=True)
@@ -202,8 +204,16 @@ def _judged(setup: Setup, solve: Solve, n2: int) -> Attempt:
     model_doubt = None
     if p_value >= opts.significance:
         setup.progress("refining", 0.66)
+        # From a start in another basin the spin-only refit is as wrong as the full one was (seen:
+        # 32-37 times their size at every stage, 7 s): given up as that one would be.
         spin = refine_dense(
-            setup.data, solve.initial.x_spin_only, spin_only=True, config=opts.dense, noise=setup.noise, seed=opts.seed
+            setup.data,
+            solve.initial.x_spin_only,
+            spin_only=True,
+            config=opts.dense,
+            noise=setup.noise,
+            seed=opts.seed,
+            give_up_scale=GIVE_UP_SCALE if solve.give_up else None,
         )
         spin_poor = poor_fit(spin)
         if spin_poor is None or (poor_fit(fit) is not None and spin.residuals > 0):
@@ -239,8 +249,8 @@ def _checked(setup: Setup, attempt: Attempt, n2: int) -> Attempt:
 
 def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str, give_up: bool) -> Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point
-    (given up after the first stage of refinement, if ``give_up``, when that leaves the residuals
-    over ``GIVE_UP_SCALE`` times their size)."""
+    (given up after the first or second stage of refinement, if ``give_up``, when that leaves the
+    residuals over ``GIVE_UP_SCALE`` times their size)."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.
@@ -279,7 +289,7 @@ def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str, give
             "is the declared range noise right?)",
             field="file",
         )
-    return Solve(fit, guess, used, len(start.inliers), path)
+    return Solve(fit, guess, used, len(start.inliers), path, give_up)
 
 
 def poor_fit(fit: DenseFit) -> str | None:
@@ -288,7 +298,9 @@ def poor_fit(fit: DenseFit) -> str | None:
     if fit.residuals == 0:
         return "no surface of one frame matched in another"
     if not fit.scale <= POOR_SCALE:
-        after = " after the first stage of refinement (given up there)" if fit.given_up else ""
+        after = ""
+        if fit.given_up:
+            after = f" after the {('first', 'second')[fit.given_up - 1]} stage of refinement (given up there)"
         return f"residuals {fit.scale:.1f} times their expected size{after}"
     return None
 

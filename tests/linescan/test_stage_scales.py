@@ -1,0 +1,40 @@
+"""The stage-scales bench (``bench/linescan/stage_scales.py``), on which the give-up's threshold
+rests: it records every stage of a real refinement and puts the thresholds back after, and it
+tells sound refinements from poor ones and counts those a give-up would drop."""
+
+from __future__ import annotations
+
+import numpy as np
+from bench.linescan.reuse_diag import at_truth
+from bench.linescan.stage_scales import Job, Refinement, recording, stage_rows
+
+from tumblescan import Scanner, Scene
+from tumblescan.linescan.dense import attempts, degeneracy, refine
+
+from ..conftest import motion_for
+
+
+def test_every_stage_of_a_refinement_is_recorded_and_the_names_put_back() -> None:
+    scene = Scene(scanner=Scanner(lines=160, pixels=160))
+    _, data, mapping, _ = at_truth(motion_for(1, distance_m=50.0), scene, 1)
+    names = (refine._iterate, attempts.refine_dense, degeneracy.refine_dense)
+    with recording() as made:
+        fit = attempts.refine_dense(data, mapping.x, noise=scene.scanner.noise)
+        attempts.refine_dense(data, fit.x, noise=scene.scanner.noise, converged=True)
+    assert (refine._iterate, attempts.refine_dense, degeneracy.refine_dense) == names
+    assert [len(r.stages) for r in made] == [3, 1] and [r.full for r in made] == [True, False]
+    # From the truth every stage stands near 1, and the last stage's scale is where it ended.
+    assert all(0.3 < s < 1.5 for s in made[0].stages)
+    assert made[0].final == fit.scale and not made[0].given_up
+
+
+def test_sound_and_poor_refinements_are_told_apart_per_stage() -> None:
+    sound = Refinement([1.0, 0.5, 0.9], 0.98, False, False, True)
+    wrong = Refinement([0.0, 32.1], 32.1, True, False, True)
+    lost = Refinement([31.9, 36.0, 36.7], 36.8, False, True, True)
+    check = Refinement([1.1], 1.1, False, False, False)  # the validation's: not from a start
+    rows = stage_rows([Job("long-array:100:1", 4, 20.0, True, [wrong, lost, sound, check])])
+    # After stage 1: one sound (1.0), two poor (0.0 and 31.9), one of them over the give-up.
+    assert rows[0][1] == 1 and rows[0][3] == 2 and rows[0][4] == "0.0 31.9" and rows[0][5:] == [0, 1]
+    assert rows[1][1] == 1 and rows[1][4] == "32.1 36.0" and rows[1][5:] == [0, 2]
+    assert np.isclose(float(rows[1][2].split(" / ")[0]), 0.5)
