@@ -37,4 +37,4 @@ def test_sound_and_poor_refinements_are_told_apart_per_stage() -> None:
     # After stage 1: one sound (1.0), two poor (0.0 and 31.9), one of them over the give-up.
     assert rows[0][1] == 1 and rows[0][3] == 2 and rows[0][4] == "0.0 31.9" and rows[0][5:] == [0, 1]
     assert rows[1][1] == 1 and rows[1][4] == "32.1 36.0" and rows[1][5:] == [0, 2]
-    assert np.isclose(float(rows[1][2].split(" / ")[0]), 0.5)
+    assert np.isclose(float(str(rows[1][2]).split(" / ")[0]), 0.5)
