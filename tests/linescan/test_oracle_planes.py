@@ -1,0 +1,62 @@
+"""The oracle-planes bench (``bench/linescan/oracle_planes.py``): a face's hits against its own
+plane lie on it at the truth, their sigmas are the noise's, and the plane's offset and tilts are
+projected off; the hits the fit holds are told from those it leaves out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from bench.linescan.dense_bound import face_of_hits, last_stage_matches
+from bench.linescan.oracle_planes import held_hits, oracle_rows, plane_rows
+from bench.linescan.reuse_diag import at_truth
+
+from tumblescan import Scanner, Scene
+from tumblescan.linescan.dense.beams import find_beams
+from tumblescan.linescan.dense.data import DenseData
+from tumblescan.linescan.dense.mapping import LineMapping
+from tumblescan.linescan.dense.surfels import Surfels
+from tumblescan.linescan.dense.terms import Terms
+
+from ..conftest import motion_for
+
+Box = tuple[Scene, DenseData, LineMapping, Surfels, np.ndarray, np.ndarray]
+
+
+def _box(noise: bool) -> Box:
+    motion = motion_for(1, distance_m=50.0)
+    scene = Scene(scanner=Scanner(lines=160, pixels=160), noise=noise)
+    sim, data, mapping, surf = at_truth(motion, scene, 1)
+    kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
+    face, normals = face_of_hits(scene, motion, sim.reference_m)
+    return scene, data, mapping, surf, face[kept], normals
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_a_faces_hits_lie_on_its_plane_within_their_noise(noise: bool) -> None:
+    scene, data, mapping, _, face, normals = _box(noise)
+    biggest = np.bincount(face[face >= 0]).argmax()
+    hits = np.flatnonzero(face == biggest)
+    lin = plane_rows(data, mapping, scene.scanner.noise, hits, normals[biggest])
+    assert len(lin.r) == len(hits) > 1000 and lin.J.shape == (len(hits), 9)
+    e = lin.r / np.sqrt(lin.var)
+    if noise:
+        # The sensor's variance along the face's normal is the rows' (three nuisances take ~nothing).
+        assert 0.9 < np.sqrt(np.mean(e**2)) < 1.1
+    else:
+        # To the mesh's rounding (face_of_hits: the closest triangle in float32).
+        assert np.max(np.abs(e)) < 1e-2
+    # What is left is blind to the plane's offset: the weighted residuals sum to zero.
+    assert abs(np.sum(lin.r / lin.var)) < 1e-6 * np.sum(np.abs(lin.r) / lin.var)
+
+
+def test_the_fits_hits_are_held_and_only_the_rest_get_oracle_rows() -> None:
+    scene, data, mapping, surf, face, normals = _box(True)
+    noise = scene.scanner.noise
+    matches, _ = last_stage_matches(data, mapping, surf, noise)
+    terms = Terms(surf, matches, find_beams(data, mapping, surf, noise)).with_grazing(data, noise, mapping)
+    held = held_hits(data, surf, terms)
+    assert held[surf.point_cell == matches.src[0]].all() and held[terms.grazing.hit].all()
+    assert 0.5 < held.mean() < 1.0
+    rows = oracle_rows(data, mapping, noise, face, normals, ~held)
+    assert 0 < len(rows.r) <= int((~held & (face >= 0)).sum())
+    assert len(oracle_rows(data, mapping, noise, face, normals, np.zeros_like(held)).r) == 0
