@@ -16,8 +16,8 @@ hit a row
     r = n . (y - c),   var r = the sensor's variance along n,
 
 ``y`` the hit mapped to ``T``, ``n`` the face's true normal and ``c`` its hits' centroid; their
-variances are scaled so that their robust scale is the pairs' (as ``Terms.with_groups`` scales
-the grazing groups'). ``+ oracle planes`` adds every such face; ``+ oracle planes, pure cells``
+variances are scaled so that their robust scale is the surfel pairs' (as ``Terms.with_groups``
+scales the grazing groups'). ``+ oracle planes`` adds every such face; ``+ oracle planes, pure cells``
 only the hits whose cell holds hits of one face alone (what a segmentation that keeps cells
 whole could find without the mesh). Per design the spread and bias over the dense bound's sigma
 of the six rotation parameters, and the steps' RMS over the draws (``error``); the share of the
@@ -52,7 +52,7 @@ DESIGNS = ("fit's terms", "+ oracle planes", "+ oracle planes, pure cells")
 MIN_HITS = 30
 
 
-def held_hits(data: DenseData, surf: Surfels, terms: Terms) -> NDArray[np.bool_]:
+def held_hits(surf: Surfels, terms: Terms) -> NDArray[np.bool_]:
     """Which kept hits ``(n,)`` the terms hold: in a matched planar surfel (source or target), a
     member's, or in a grazing group."""
     matched = np.zeros(len(surf.planar), dtype=bool)
@@ -67,8 +67,12 @@ def held_hits(data: DenseData, surf: Surfels, terms: Terms) -> NDArray[np.bool_]
 def plane_rows(
     data: DenseData, mapping: LineMapping, noise: SensorNoise, hits: NDArray[np.int64], normal: NDArray[np.float64]
 ) -> Linearized:
-    """The rows of ``hits`` (indices of kept hits, ``(k,)``) against a plane of true normal
-    ``normal`` ``(3,)`` at ``T`` through their centroid, its offset and tilts projected off."""
+    """The rows of ``hits`` (indices of kept hits, ``(k,)``) against a plane of unit normal
+    ``normal`` ``(3,)`` at ``T`` through their centroid ``c``: ``r = n . (y - c)`` (m), ``y`` each
+    hit mapped to ``T``, with the plane's own parameters as nuisances (its offset ``d`` and tilts
+    ``a, b`` about the perpendiculars ``e1, e2``: ``dr/dd = -1``, ``dr/da = e1 . (y - c)``,
+    ``dr/db = e2 . (y - c)``) projected off the residuals and their derivatives w.r.t. the
+    motion ``(k, free)``; variances (m²) the sensor's along ``n``."""
     xyz, line = data.xyz_m[hits], data.line[hits]
     y = mapping.apply(xyz, line)
     c = y.mean(axis=0)
@@ -103,11 +107,12 @@ def oracle_rows(
     return Linearized(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("r", "J", "var")))
 
 
-def joined(base: Linearized, extra: Linearized) -> Linearized:
-    """``base`` and ``extra``'s rows, ``extra``'s variances scaled to ``base``'s robust scale."""
+def joined(base: Linearized, extra: Linearized, pairs: Linearized) -> Linearized:
+    """``base``'s and ``extra``'s rows, ``extra``'s variances times ``(s_e / s_p)^2``, ``s_e``
+    their normalised residuals' robust scale and ``s_p`` the surfel ``pairs``'."""
     if len(extra.r) == 0:
         return base
-    s_b = robust_sigma(base.r / np.sqrt(base.var))
+    s_b = robust_sigma(pairs.r / np.sqrt(pairs.var))
     s_e = robust_sigma(extra.r / np.sqrt(extra.var))
     scale2 = (s_e / s_b) ** 2 if s_b > 0 and s_e > 0 else 1.0
     return Linearized(
@@ -137,9 +142,9 @@ def case(spec: ShapeCase, draws: int) -> CaseResult:
         kept = np.ones(len(sim.xyz_m), dtype=bool) if data.kept is None else data.kept
         faces, normals = face_of_hits(scene, motion, sim.reference_m)
         face = faces[kept]
-        matches, _ = last_stage_matches(data, mapping, surf, noise)
+        matches, pairs = last_stage_matches(data, mapping, surf, noise)
         terms = Terms(surf, matches, find_beams(data, mapping, surf, noise)).with_grazing(data, noise, mapping)
-        held = held_hits(data, surf, terms)
+        held = held_hits(surf, terms)
         pure_cell = surfel_roles(data, surf, face).pure[surf.point_cell]
         base = terms.linearize(data, noise, mapping)
         for label, free in (
@@ -148,8 +153,9 @@ def case(spec: ShapeCase, draws: int) -> CaseResult:
             ("+ oracle planes, pure cells", ~held & pure_cell),
         ):
             extra = oracle_rows(data, mapping, noise, face, normals, free)
-            steps[label].append(newton_step(*normalised(joined(base, extra)), loss))
+            steps[label].append(newton_step(*normalised(joined(base, extra, pairs)), loss))
             shares[label].append((held.sum() + len(extra.r)) / len(held))
+    # The bound of the last draw's frames: the draws differ in their noise alone, not in the hits.
     bound_sd = np.sqrt(np.diag(bound_covariances(motion, scene, sim, float(sim.t_s.min())).facets))
     return CaseResult(
         {label: bias_table(np.array(st), bound_sd) for label, st in steps.items()},
@@ -159,6 +165,7 @@ def case(spec: ShapeCase, draws: int) -> CaseResult:
 
 
 def rms(values: np.ndarray) -> float:
+    """The root mean square of ``values``."""
     return float(np.sqrt(np.mean(np.square(values))))
 
 

@@ -6,15 +6,20 @@
     python -m bench.linescan.stage_scales --cases hubble:50:6 box:50:7
 
 What ``attempts.GIVE_UP_SCALE`` rests on. Every refinement of a whole dense estimate is recorded:
-the common scale ``s`` of the centroid-to-plane residuals over their model sigmas after each of
-its stages (about 1 when the motion is right), the scale it ended at, and whether it was given
-up. The first form runs the real-shapes bench's seeded motions (the default starts, as a user
-gets them); the second replaces the vote's turns with those of other seeds' motions (a start in
-another basin, as ``tests/linescan/dense/test_refine`` does for one) on each case given; the
-third, only the cases given. It
-prints, per stage, the scales of the refinements that ended sound (at most ``POOR_SCALE``) and
-of those that ended poor or were given up, and whether a give-up at ``GIVE_UP_SCALE`` after that
-stage would have dropped a sound one; each job's time; writes ``bench/out/STEM.json``.
+after each of its stages the common scale that stage weighed its rows by (``s = 1.4826
+median |r / sqrt(var)|`` over every row of its last linearisation: the surfel pairs', from the
+second stage the thin members' and in the last the grazing groups' too; about 1 when the motion
+is right, dimensionless), the fit's own ``DenseFit.scale`` where it ended (the same statistic
+of the pairs alone, at the final motion), and after which stage it was given up, if it was.
+
+The first form runs the real-shapes bench's seeded motions (the default starts, as a user gets
+them); the second replaces the vote's turns with those of other seeds' motions (a start in
+another basin, as ``tests/linescan/dense/test_refine`` does for one; the re-timed votes within
+the solve too) on each case given; the third, only the cases given. ``--no-give-up`` sets
+``GIVE_UP_SCALE`` to infinity for the run, so that every refinement runs to the end and what a
+give-up would drop is seen. It prints, per stage, the scales of the refinements that ended sound
+(at most ``POOR_SCALE``) and of those that ended poor or were given up, and how many of each
+stood over ``GIVE_UP_SCALE`` after that stage; each job's time; writes ``bench/out/STEM.json``.
 """
 
 from __future__ import annotations
@@ -48,7 +53,7 @@ class Refinement:
 
     stages: list[float]
     final: float
-    given_up: bool
+    given_up: int  # the stage after which it was given up; 0: every stage ran
     spin_only: bool
     full: bool  # every stage from a start (not the validation's or a refit's last stage alone)
 
@@ -81,7 +86,7 @@ def recording() -> Iterator[list[Refinement]]:
         scales.clear()
         fit = refine_dense(*args, **kwargs)
         full = not kwargs.get("converged", False)
-        made.append(Refinement(list(scales), float(fit.scale), bool(fit.given_up), bool(fit.spin_only), full))
+        made.append(Refinement(list(scales), float(fit.scale), int(fit.given_up), bool(fit.spin_only), full))
         return fit
 
     saved = [(refine, "_iterate", iterate), (attempts, "refine_dense", attempts.refine_dense)]
@@ -154,12 +159,15 @@ def stage_rows(jobs: list[Job]) -> list[list[object]]:
 
 
 def spread(values: list[float]) -> str:
+    """``min / median / max`` of ``values``, or ``-``."""
     if not values:
         return "-"
     return f"{np.min(values):.2f} / {np.median(values):.2f} / {np.max(values):.2f}"
 
 
 def job_rows(jobs: list[Job]) -> list[list[object]]:
+    """One row per job: its case, the wrong turns' seed, its time, whether within the limits, and
+    each refinement from a start as its stages' scales and where it ended."""
     rows: list[list[object]] = []
     for j in jobs:
         full = [r for r in j.refinements if r.full]
@@ -172,6 +180,7 @@ def job_rows(jobs: list[Job]) -> list[list[object]]:
 
 
 def report(jobs: list[Job], stem: str) -> None:
+    """Print the per-stage table and the jobs' table; write ``bench/out/STEM.json``."""
     print(
         f"\nScale after each stage of the refinements from a start (min / median / max; give-up at "
         f"{attempts.GIVE_UP_SCALE:g}, poor above {attempts.POOR_SCALE:g} at the end):"
@@ -186,6 +195,7 @@ def report(jobs: list[Job], stem: str) -> None:
 
 
 def main() -> None:
+    """Run the jobs the command line names and report them."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--motions", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
@@ -195,7 +205,10 @@ def main() -> None:
     parser.add_argument("--wrong-starts", type=int, nargs="+", help="seeds whose turns replace the vote's")
     add_cases(parser)  # only these cases (with --wrong-starts: default long-array:100:1)
     parser.add_argument("--stem", default="stage_scales")
+    parser.add_argument("--no-give-up", action="store_true", help="every refinement runs to the end")
     args = parser.parse_args()
+    if args.no_give_up:
+        attempts.GIVE_UP_SCALE = float("inf")
     shapes = start_run(args.shapes)
     runs: list[tuple[ShapeCase, int | None]]
     if args.wrong_starts:

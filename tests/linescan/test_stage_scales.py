@@ -1,6 +1,6 @@
 """The stage-scales bench (``bench/linescan/stage_scales.py``), on which the give-up's threshold
-rests: it records every stage of a real refinement and puts the thresholds back after, and it
-tells sound refinements from poor ones and counts those a give-up would drop."""
+rests: it records every stage of a real refinement and puts the names it wraps back after, and
+it tells sound refinements from poor ones and counts those a give-up would drop."""
 
 from __future__ import annotations
 
@@ -21,18 +21,20 @@ def test_every_stage_of_a_refinement_is_recorded_and_the_names_put_back() -> Non
     with recording() as made:
         fit = attempts.refine_dense(data, mapping.x, noise=scene.scanner.noise)
         attempts.refine_dense(data, fit.x, noise=scene.scanner.noise, converged=True)
+        # A threshold under every right motion's scale: given up after the first stage.
+        attempts.refine_dense(data, mapping.x, noise=scene.scanner.noise, give_up_scale=0.1)
     assert (refine._iterate, attempts.refine_dense, degeneracy.refine_dense) == names
-    assert [len(r.stages) for r in made] == [3, 1] and [r.full for r in made] == [True, False]
-    # From the truth every stage stands near 1, and the last stage's scale is where it ended.
-    assert all(0.3 < s < 1.5 for s in made[0].stages)
-    assert made[0].final == fit.scale and not made[0].given_up
+    assert [len(r.stages) for r in made] == [3, 1, 1] and [r.full for r in made] == [True, False, True]
+    assert [r.given_up for r in made] == [0, 0, 1]
+    # From the truth every stage stands near 1.
+    assert all(0.3 < s < 1.5 for r in made for s in r.stages)
 
 
 def test_sound_and_poor_refinements_are_told_apart_per_stage() -> None:
-    sound = Refinement([1.0, 0.5, 0.9], 0.98, False, False, True)
-    wrong = Refinement([0.0, 32.1], 32.1, True, False, True)
-    lost = Refinement([31.9, 36.0, 36.7], 36.8, False, True, True)
-    check = Refinement([1.1], 1.1, False, False, False)  # the validation's: not from a start
+    sound = Refinement([1.0, 0.5, 0.9], 0.98, 0, False, True)
+    wrong = Refinement([0.0, 32.1], 32.1, 2, False, True)
+    lost = Refinement([31.9, 36.0, 36.7], 36.8, 0, True, True)
+    check = Refinement([1.1], 1.1, 0, False, False)  # the validation's: not from a start
     rows = stage_rows([Job("long-array:100:1", 4, 20.0, True, [wrong, lost, sound, check])])
     # After stage 1: one sound (1.0), two poor (0.0 and 31.9), one of them over the give-up.
     assert rows[0][1] == 1 and rows[0][3] == 2 and rows[0][4] == "0.0 31.9" and rows[0][5:] == [0, 1]

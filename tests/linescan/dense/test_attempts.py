@@ -20,7 +20,8 @@ class FakeFit:
     x: np.ndarray = field(default_factory=lambda: np.array([0.3, 1.0, 0.5, 1.2, 0.8, 0.1, 0.0, 0.0, 50.0]))
     residuals: int = 1000
     cov: np.ndarray = field(default_factory=lambda: np.eye(9))
-    given_up: bool = False
+    given_up: int = 0
+    given_up_scale: float = float("nan")
 
 
 def script(monkeypatch: pytest.MonkeyPatch, outcomes: list[tuple[float, bool, int]]) -> list[str]:
@@ -252,7 +253,7 @@ def test_when_every_fit_is_poor_each_is_checked_and_the_least_flawed_kept(monkey
     assert best.fit.scale == 5.0 and best.check is not None and "no start was sound" in warnings[-1]
 
 
-def test_every_start_but_the_last_may_be_given_up_after_its_first_stage(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_every_start_but_the_last_may_be_given_up_early(monkeypatch: pytest.MonkeyPatch) -> None:
     # The last start is refined to the end, so that a job where no start is sound reports a whole
     # refinement among its candidates.
     script(monkeypatch, [(20.0, True, 0)] * 3)
@@ -268,24 +269,44 @@ def test_every_start_but_the_last_may_be_given_up_after_its_first_stage(monkeypa
     assert flags == [True, True, False]
 
 
-@pytest.mark.parametrize("give_up", [True, False])
-def test_the_spin_only_refit_may_be_given_up_as_its_start_may(monkeypatch: pytest.MonkeyPatch, give_up: bool) -> None:
+@pytest.mark.parametrize(("give_up", "full_scale"), [(True, 30.0), (False, 30.0), (True, 1.0)])
+def test_the_spin_only_refit_of_a_poor_start_may_be_given_up_as_that_start_may(
+    monkeypatch: pytest.MonkeyPatch, give_up: bool, full_scale: float
+) -> None:
     # Seen on the long array at 100 m seed 1 from another motion's turns: the vote's refinement
     # was given up after its first stage, and the spin-only refit from the same start ran all three
-    # at 32-37 times its residuals' size (7 s) before the next start.
-    full = FakeFit(30.0, np.full(10, 0.02), given_up=True)
+    # at 32-37 times its residuals' size (7 s) before the next start. From a sound fit's start
+    # (``full_scale`` 1) the refit runs to the end: without its precession that start may be off.
+    full = FakeFit(full_scale, np.full(10, 0.02), given_up=int(full_scale > 9), given_up_scale=full_scale)
     asked: list[object] = []
 
     def refit(*args: Any, **kwargs: Any) -> FakeFit:
         asked.append(kwargs.get("give_up_scale"))
-        return FakeFit(31.9, np.full(10, 0.02), given_up=give_up)
+        stopped = kwargs.get("give_up_scale") is not None
+        return FakeFit(31.9 if stopped else 36.8, np.full(10, 0.02), given_up=int(stopped), given_up_scale=31.9)
 
     monkeypatch.setattr(est, "precession_p_value", lambda x, cov: 0.99)
     monkeypatch.setattr(est, "refine_dense", refit)
     setup = type("S", (Setup,), {"data": type("D", (), {"n_frames": 10})(), "noise": None})()
     setup.opts = type("O", (), {"seed": 0, "model": "auto", "significance": 0.05, "dense": None})()
+    monkeypatch.setattr(est, "_validate", lambda *a: Similarity(True, 1.0, 3.0, "covariance"))
     initial = type("G", (), {"x_spin_only": full.x})()
     solve = est.Solve(full, initial, 10, 10, "registration+cone+dense", give_up=give_up)  # type: ignore[arg-type]
     attempt = est._judged(setup, solve, 10)
-    assert asked == [est.GIVE_UP_SCALE if give_up else None]
-    assert attempt.problem() is not None and "residuals" in attempt.problem()  # type: ignore[operator]
+    stopped = give_up and full_scale > 9
+    assert asked == [est.GIVE_UP_SCALE if stopped else None]
+    if full_scale > 9:
+        # Both poor: the spin-only refit is reported, and why it is poor.
+        why = attempt.problem()
+        assert why is not None and ("(given up there)" in why) == stopped, why
+    else:
+        assert attempt.fit is full and "spin-only refit does not fit" in attempt.warnings[0]
+
+
+def test_a_given_up_fit_is_poor_whatever_its_own_scale() -> None:
+    # The scale a fit reports is its surfel pairs' at the motion it stopped at; the stage it was
+    # given up after weighed every row (members' too), and stood over the give-up.
+    fit = FakeFit(2.1, np.full(10, 0.02), given_up=2, given_up_scale=12.7)
+    why = est.poor_fit(fit)  # type: ignore[arg-type]
+    assert why == "residuals 12.7 times their expected size after the second stage of refinement (given up there)"
+    assert est.poor_fit(FakeFit(2.1, np.full(10, 0.02))) is None  # type: ignore[arg-type]

@@ -80,6 +80,8 @@ def test_a_start_in_another_basin_is_given_up_after_the_first_stage(monkeypatch:
         # The last stage is never given up: its fit is the refinement's.
         ([1.0, 1.0, 20.0], 9.0, 3, 0),
         ([20.0, 32.1, 36.7], None, 3, 0),
+        # A converged start runs the last stage alone: never given up.
+        ([20.0], 9.0, 1, 0),
     ],
 )
 def test_a_refinement_is_given_up_after_any_stage_but_the_last(
@@ -97,8 +99,16 @@ def test_a_refinement_is_given_up_after_any_stage_but_the_last(
         return (*out[:-1], ran[-1])
 
     monkeypatch.setattr(refine, "_iterate", scripted)
-    fit = refine.refine_dense(data, mapping.x, noise=scene.scanner.noise, give_up_scale=give_up_scale)
+    converged = len(scales) == 1
+    fit = refine.refine_dense(
+        data, mapping.x, noise=scene.scanner.noise, give_up_scale=give_up_scale, converged=converged
+    )
     assert len(ran) == stages_run and fit.given_up == given_up
+    why = attempts.poor_fit(fit)
     if given_up:
-        why = attempts.poor_fit(replace(fit, scale=scales[given_up - 1]))
-        assert why is not None and f"after the {('first', 'second')[given_up - 1]} stage of refinement" in why
+        assert fit.given_up_scale == scales[given_up - 1]
+        stage = ("first", "second")[given_up - 1]
+        size = f"residuals {scales[given_up - 1]:.1f} times their expected size"
+        assert why == f"{size} after the {stage} stage of refinement (given up there)"
+    else:
+        assert why is None  # from the truth every stage's own scale is about 1

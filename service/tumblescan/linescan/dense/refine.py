@@ -98,6 +98,7 @@ class DenseFit:
     scale: float
     members: int = 0  # thin members fitted as lines (:mod:`.beams`)
     given_up: int = 0  # the stage after which it stopped (``give_up_scale``); 0: every stage ran
+    given_up_scale: float = float("nan")  # that stage's scale, over every row it weighed
 
     @property
     def spin_only(self) -> bool:
@@ -207,7 +208,7 @@ def refine_dense(
             # seed 1), where a sound start's stood at 1.0. A start that matched next to nothing in
             # the first stage passes it (scale 0) and shows after the second (32.1, then 10.0).
             assert terms is not None
-            return replace(_finish(problem, z, terms, step), given_up=k + 1)
+            return replace(_finish(problem, z, terms, step), given_up=k + 1, given_up_scale=scale)
     assert terms is not None
     return _finish(problem, z, terms, step)
 
