@@ -45,6 +45,7 @@ from ..common import ShapeCase, draws_arguments, machine, out_dir, table
 from .dense_bound import bound_covariances, face_of_hits, last_stage_matches
 from .draw_bias import PARAM_NAMES, bias_table, surfel_roles
 from .loss_choice import cauchy, newton_step, normalised
+from .member_prism import rms
 from .real_shapes import shape_named
 from .reuse_diag import at_truth
 
@@ -162,11 +163,6 @@ def case(spec: ShapeCase, draws: int) -> CaseResult:
         {label: np.sqrt(np.mean(np.square(st), axis=0)) / bound_sd for label, st in steps.items()},
         {label: float(np.mean(v)) for label, v in shares.items()},
     )
-
-
-def rms(values: np.ndarray) -> float:
-    """The root mean square of ``values``."""
-    return float(np.sqrt(np.mean(np.square(values))))
 
 
 def main() -> None:
