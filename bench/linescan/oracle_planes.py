@@ -98,10 +98,14 @@ def oracle_rows(
 ) -> Linearized:
     """Every face's rows (:func:`plane_rows`) of the hits ``free`` marks ``(n,)``, faces of
     fewer than ``MIN_HITS`` such hits left out."""
+    # The marked hits grouped by face in one sort (stable: each face's hits in their own order).
+    marked = np.flatnonzero(free & (face >= 0))
+    marked = marked[np.argsort(face[marked], kind="stable")]
+    faces, first = np.unique(face[marked], return_index=True)
     parts = [
         plane_rows(data, mapping, noise, hits, normals[f])
-        for f in np.unique(face[free & (face >= 0)])
-        if len(hits := np.flatnonzero(free & (face == f))) >= MIN_HITS
+        for f, hits in zip(faces, np.split(marked, first[1:]) if len(marked) else [], strict=True)
+        if len(hits) >= MIN_HITS
     ]
     if not parts:
         return Linearized(np.zeros(0), np.zeros((0, len(mapping.free))), np.zeros(0))

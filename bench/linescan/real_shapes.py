@@ -53,7 +53,7 @@ from tumblescan import (
 )
 from tumblescan._open3d import load_open3d
 from tumblescan.linescan.dense.degeneracy import AXIS_LIMIT_DEG, RATE_LIMIT_DEG_S
-from tumblescan.linescan.frames import assemble_frames
+from tumblescan.linescan.frames import Frames, assemble_frames
 from tumblescan.linescan.options import DenseConfig
 from tumblescan.linescan.simulate import FrameCloud
 from tumblescan.target.shape import SatelliteShape
@@ -102,10 +102,21 @@ def shape_named(name: str) -> Any:
     return PARAMETRIC[name]()
 
 
-def one(name: str, distance_m: float, seed: int, size: int, options: FramesOptions | None = None) -> Case:
+def simulated(name: str, distance_m: float, seed: int, size: int) -> tuple[Motion, Scene, FrameCloud]:
+    """The bench's case: seed ``seed``'s motion on the paper's grid at ``distance_m``, the shape
+    ``name`` under a ``size`` x ``size`` scanner, and its seeded frames."""
     motion = random_motion(np.random.default_rng(seed), distance_m=distance_m)
     scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(name))
-    return estimated(name, distance_m, seed, motion, scene, simulate_frames(motion, scene, seed=seed), options)
+    return motion, scene, simulate_frames(motion, scene, seed=seed)
+
+
+def frames_of(sim: FrameCloud) -> Frames:
+    """The simulated frames as a user uploads them: points with their times, frames and lines."""
+    return assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+
+
+def one(name: str, distance_m: float, seed: int, size: int, options: FramesOptions | None = None) -> Case:
+    return estimated(name, distance_m, seed, *simulated(name, distance_m, seed, size), options)
 
 
 def estimated(
@@ -119,7 +130,7 @@ def estimated(
 ) -> Case:
     """The whole estimate on the frames ``sim`` of ``motion`` (default options, or ``options``),
     judged against the truth and the bound."""
-    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+    frames = frames_of(sim)
     started = time.perf_counter()
     result = estimate_from_frames(frames, options)
     seconds = time.perf_counter() - started
@@ -186,9 +197,7 @@ def against_bound(motion: Motion, scene: Scene, sim: FrameCloud, reference_time_
 
 def rebound(case: Case, size: int) -> Case:
     """The saved case with its bound computed anew (same seeded frames; the estimate kept)."""
-    motion = random_motion(np.random.default_rng(case.seed), distance_m=case.distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(case.shape))
-    sim = simulate_frames(motion, scene, seed=case.seed)
+    motion, scene, sim = simulated(case.shape, case.distance_m, case.seed, size)
     # Runs saved before the field: the estimate's reference time is the first point's.
     T = case.reference_time_s if case.reference_time_s is not None else float(sim.t_s.min())
     return replace(case, reference_time_s=T, **against_bound(motion, scene, sim, T, case.errors))

@@ -34,15 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
+from tumblescan import estimate_from_frames, random_motion
 from tumblescan.linescan.dense import attempts, refine
 from tumblescan.linescan.dense.registration import PairTransforms
 from tumblescan.linescan.dense.starts import Start
-from tumblescan.linescan.frames import assemble_frames
 
 from ..common import ShapeCase, add_cases, out_dir, table
 from .dense import errors
-from .real_shapes import shape_named, start_run, within_limits
+from .real_shapes import frames_of, simulated, start_run, within_limits
 
 STAGES = 3
 
@@ -125,10 +124,8 @@ def vote_replaced(turns_seed: int | None, distance_m: float) -> Iterator[None]:
 
 def job(case: ShapeCase, wrong_seed: int | None, size: int) -> Job:
     """The whole dense estimate on the case's seeded frames, every refinement recorded."""
-    motion = random_motion(np.random.default_rng(case.seed), distance_m=case.distance_m)
-    scene = Scene(scanner=Scanner(lines=size, pixels=size), shape=shape_named(case.name))
-    sim = simulate_frames(motion, scene, seed=case.seed)
-    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+    motion, _, sim = simulated(case.name, case.distance_m, case.seed, size)
+    frames = frames_of(sim)
     with recording() as made, vote_replaced(wrong_seed, case.distance_m):
         started = time.perf_counter()
         result = estimate_from_frames(frames)

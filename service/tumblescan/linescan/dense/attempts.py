@@ -204,6 +204,7 @@ def _judged(setup: Setup, solve: Solve, n2: int) -> Attempt:
     model_doubt = None
     if p_value >= opts.significance:
         setup.progress("refining", 0.66)
+        full_poor = poor_fit(fit)
         # From a start in another basin the spin-only refit is as wrong as the full one was (seen:
         # 32-37 times their size at every stage, 7 s): given up as that one would be. Not from a
         # sound fit's start: without its precession that start may well be off after one stage.
@@ -214,10 +215,10 @@ def _judged(setup: Setup, solve: Solve, n2: int) -> Attempt:
             config=opts.dense,
             noise=setup.noise,
             seed=opts.seed,
-            give_up_scale=GIVE_UP_SCALE if solve.give_up and poor_fit(fit) is not None else None,
+            give_up_scale=GIVE_UP_SCALE if solve.give_up and full_poor is not None else None,
         )
         spin_poor = poor_fit(spin)
-        if spin_poor is None or (poor_fit(fit) is not None and spin.residuals > 0):
+        if spin_poor is None or (full_poor is not None and spin.residuals > 0):
             fit = spin
             warnings.append(
                 f"no significant precession (Wald test p={p_value:.3g}): reporting the spin-only model; the "
@@ -301,7 +302,7 @@ def poor_fit(fit: DenseFit) -> str | None:
     if fit.given_up:
         # Poor whatever its own scale: a half-refined motion (the scale the fit reports, of the
         # surfel pairs alone, may fall under POOR_SCALE where every row's stood over the give-up).
-        stage = ("first", "second")[fit.given_up - 1] if fit.given_up <= 2 else f"{fit.given_up}th"
+        stage = ("first", "second")[fit.given_up - 1]  # never the last of the three
         return (
             f"residuals {fit.given_up_scale:.1f} times their expected size after the {stage} stage of refinement "
             "(given up there)"
