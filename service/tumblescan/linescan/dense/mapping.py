@@ -2,7 +2,7 @@
 
 With a motion ``x``, every point ``p`` seen at ``t = T + tau`` maps to ``T`` as
 ``M(p, tau; x) = O_p + R(tau)^T (p - O_p)``; ``R(tau)^T`` is computed once per line time, with
-its complex-step derivatives in the free parameters.
+its derivatives in the free parameters as axial vectors (``LineMapping._axial``).
 """
 
 from __future__ import annotations
@@ -15,15 +15,14 @@ from numpy.typing import NDArray
 from ..._typing import FloatArray, IntArray
 from ...geometry.rotations import axis_from_angles, rotation_matrix
 
-STEP = 1e-20  # complex-step size: exact derivatives, no cancellation
 # Points mapped to T per chunk of this many (LineMapping.apply): the gathered rotations stay in cache.
 APPLY_CHUNK = 65536
-# Rows per chunk of LineMapping.normal_derivative: its (rows, 9, parameters) gather stays in cache.
+# Rows per chunk of LineMapping.normal_derivative: its gather of each row's line stays in cache.
 DERIVATIVE_CHUNK = 4096
 
 
 class LineMapping:
-    """``R(tau)^T`` per line and its derivatives w.r.t. the free parameters (complex step)."""
+    """``R(tau)^T`` per line and its derivatives w.r.t. the free parameters."""
 
     def __init__(self, x: FloatArray, tau_s: FloatArray, free: tuple[int, ...]) -> None:
         self.x = x
@@ -31,18 +30,6 @@ class LineMapping:
         self.Rt = _rotations_T(x.astype(complex)[None, :], tau_s)[0].real
         self.free = free
         self.center = x[6:9]
-
-    @cached_property
-    def dRt(self) -> FloatArray:
-        """``(lines, 9, k)``: row ``3a + b`` holds ``d(R^T)[a, b]`` for each free parameter."""
-        # The centre (parameters 6-8) does not enter R: its columns are zero, not probed.
-        turning = [j for j, p in enumerate(self.free) if p < 6]
-        probes = np.tile(self.x.astype(complex), (len(turning), 1))
-        probes[np.arange(len(turning)), [self.free[j] for j in turning]] += 1j * STEP
-        dRt = np.zeros((len(self.tau_s), 9, len(self.free)))
-        step = _rotations_T(probes, self.tau_s).imag / STEP  # (turning, lines, 3, 3)
-        dRt[:, :, turning] = step.transpose(1, 2, 3, 0).reshape(len(self.tau_s), 9, len(turning))
-        return dRt
 
     @cached_property
     def _rows(self) -> FloatArray:
@@ -79,23 +66,52 @@ class LineMapping:
                     o -= center
         return out
 
+    @cached_property
+    def _axial(self) -> FloatArray:
+        """``(3, lines, turning)``: the axial vector ``g`` of ``R d(R^T)/dx`` per turning parameter.
+
+        ``R R^T = I`` makes ``R d(R^T)`` skew, so ``d(R^T) v = R^T (g x v)`` and
+        ``n . d(R^T) v = g . (v x R n)``: three products a parameter where the 3 x 3 derivative
+        takes nine. With ``R = Rp Rs``, ``g = -(w_p + Rp w_s)``, the spatial angular velocities
+        of each factor: ``tau l`` along its rate, ``sin(theta) dl + (1 - cos(theta)) l x dl``
+        along either angle of its axis ``l`` (``theta`` its angle, ``dl`` the axis' derivative).
+        """
+        x, tau = self.x, self.tau_s
+        Rp = rotation_matrix(axis_from_angles(x[3], x[4]), x[5] * tau)
+        omega: dict[int, FloatArray] = {}
+        for first, spun in ((0, True), (3, False)):
+            a, b, w = x[first], x[first + 1], x[first + 2]
+            l = axis_from_angles(a, b)
+            dl = (np.array([-np.sin(a) * np.sin(b), np.cos(a) * np.sin(b), 0.0]), axis_from_angles(a, b + np.pi / 2))
+            theta = w * tau[:, None]
+            for k, d in enumerate(dl):
+                omega[first + k] = np.sin(theta) * d + (1 - np.cos(theta)) * np.cross(l, d)
+            omega[first + 2] = tau[:, None] * l
+            if spun:  # the spin's velocities are carried through the precession
+                for k in range(first, first + 3):
+                    omega[k] = np.einsum("lab,lb->la", Rp, omega[k])
+        return -np.stack([omega[p] for p in self.free if p < 6], axis=-1).transpose(1, 0, 2)
+
     def normal_derivative(self, n: FloatArray, xyz: FloatArray, line: IntArray) -> FloatArray:
-        """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``; the centre enters as ``(I - R^T)``."""
-        v = xyz - self.center
-        out = np.zeros((len(xyz), len(self.free)))
-        dRt = self.dRt
-        # Each row's lines' derivatives gathered once per chunk that stays in cache (not once
-        # per entry of R^T over every row), summed in the same order.
+        """``n . dM(xyz, line)/dx_free`` for each row, ``(rows, k)``: ``g . (v x R n)`` for the
+        turning parameters (``_axial``, ``v = xyz - O_p``) and ``n - R n`` for the centre's."""
+        rows = self._rows
+        turning = [j for j, p in enumerate(self.free) if p < 6]
+        out = np.empty((len(xyz), len(self.free)))
+        # Gathered per chunk that stays in cache: a row's R, then its line's axial vectors.
         for s in range(0, len(xyz), DERIVATIVE_CHUNK):
-            part = dRt[line[s : s + DERIVATIVE_CHUNK]]
-            o, n_s, v_s = out[s : s + DERIVATIVE_CHUNK], n[s : s + DERIVATIVE_CHUNK], v[s : s + DERIVATIVE_CHUNK]
-            for a in range(3):
-                for b in range(3):
-                    o += (n_s[:, a] * v_s[:, b])[:, None] * part[:, 3 * a + b]
-        Rtn = np.einsum("nab,na->nb", self.Rt[line], n)
-        for j, p in enumerate(self.free):
-            if p >= 6:
-                out[:, j] += n[:, p - 6] - Rtn[:, p - 6]
+            ln = line[s : s + DERIVATIVE_CHUNK]
+            n_s = n[s : s + DERIVATIVE_CHUNK].T
+            v = (xyz[s : s + DERIVATIVE_CHUNK] - self.center).T
+            # R n, entry b = sum_a R^T[a, b] n_a
+            Rn = [rows[b][ln] * n_s[0] + rows[3 + b][ln] * n_s[1] + rows[6 + b][ln] * n_s[2] for b in range(3)]
+            q = (v[1] * Rn[2] - v[2] * Rn[1], v[2] * Rn[0] - v[0] * Rn[2], v[0] * Rn[1] - v[1] * Rn[0])
+            o = out[s : s + DERIVATIVE_CHUNK]
+            g = self._axial[:, ln]
+            o[:, turning] = q[0][:, None] * g[0] + q[1][:, None] * g[1] + q[2][:, None] * g[2]
+            for j, p in enumerate(self.free):
+                if p >= 6:
+                    o[:, j] = n_s[p - 6] - Rn[p - 6]
         return out
 
 
