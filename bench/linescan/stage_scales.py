@@ -10,7 +10,8 @@ after each of its stages the common scale that stage weighed its rows by (``s = 
 median |r / sqrt(var)|`` over every row of its last linearisation: the surfel pairs', from the
 second stage the thin members' and in the last the grazing groups' too; about 1 when the motion
 is right, dimensionless), the fit's own ``DenseFit.scale`` where it ended (the same statistic
-of the pairs alone, at the final motion), and after which stage it was given up, if it was.
+of the pairs alone, at the final motion), in which stage it was given up, if it was, and the
+scale after each step of each stage (``refine.GIVE_UP_STEPS``: a stage may be given up within).
 
 The first form runs the real-shapes bench's seeded motions (the default starts, as a user gets
 them); the second replaces the vote's turns with those of other seeds' motions (a start in
@@ -52,9 +53,10 @@ class Refinement:
 
     stages: list[float]
     final: float
-    given_up: int  # the stage after which it was given up; 0: every stage ran
+    given_up: int  # the stage in which it was given up; 0: every stage ran
     spin_only: bool
     full: bool  # every stage from a start (not the validation's or a refit's last stage alone)
+    steps: list[list[float]] = field(default_factory=list)  # per stage, the scale after 0, 1, ... steps
 
 
 @dataclass
@@ -74,23 +76,37 @@ def recording() -> Iterator[list[Refinement]]:
 
     made: list[Refinement] = []
     scales: list[float] = []
-    iterate, refine_dense = refine._iterate, refine.refine_dense
+    steps: list[list[float]] = []  # the current refinement's, per stage
+    iterate, weights, refine_dense = refine._iterate, refine.weights, refine.refine_dense
 
     def counted(*args: Any, **kwargs: Any) -> Any:
-        out = iterate(*args, **kwargs)
+        steps.append([])
+        try:
+            out = iterate(*args, **kwargs)
+        finally:
+            steps.append([])  # closed: the weights of what follows (the fit's _finish) are not a step's
         scales.append(float(out[-1]))
+        return out
+
+    def weighed(*args: Any, **kwargs: Any) -> Any:
+        out = weights(*args, **kwargs)
+        if steps:
+            steps[-1].append(float(out[1]))
         return out
 
     def recorded(*args: Any, **kwargs: Any) -> Any:
         scales.clear()
+        steps.clear()
         fit = refine_dense(*args, **kwargs)
         full = not kwargs.get("converged", False)
-        made.append(Refinement(list(scales), float(fit.scale), int(fit.given_up), bool(fit.spin_only), full))
+        per_stage = steps[0::2]
+        made.append(Refinement(list(scales), float(fit.scale), int(fit.given_up), bool(fit.spin_only), full, per_stage))
         return fit
 
-    saved = [(refine, "_iterate", iterate), (attempts, "refine_dense", attempts.refine_dense)]
-    saved.append((degeneracy, "refine_dense", degeneracy.refine_dense))
+    saved = [(refine, "_iterate", iterate), (refine, "weights", weights)]
+    saved += [(attempts, "refine_dense", attempts.refine_dense), (degeneracy, "refine_dense", degeneracy.refine_dense)]
     refine._iterate = counted
+    refine.weights = weighed
     attempts.refine_dense = recorded
     degeneracy.refine_dense = recorded
     try:
@@ -155,6 +171,29 @@ def stage_rows(jobs: list[Job]) -> list[list[object]]:
     return rows
 
 
+def step_rows(jobs: list[Job], after: tuple[int, ...] = (2, 4, 6, 8, 10, 14)) -> list[list[object]]:
+    """The first stage, after ``k`` of its steps: the largest scale of the full refinements that
+    ended sound and the smallest of the others, among those still stepping then, and how many of
+    each stood over ``GIVE_UP_SCALE`` (what ``refine.GIVE_UP_STEPS`` rests on)."""
+    full = [r for j in jobs for r in j.refinements if r.full and r.steps]
+    sound = [r for r in full if not r.given_up and r.final <= attempts.POOR_SCALE]
+    poor = [r for r in full if r not in sound]
+    rows: list[list[object]] = []
+    for k in after:
+        ok = [r.steps[0][k] for r in sound if len(r.steps[0]) > k]
+        bad = [r.steps[0][k] for r in poor if len(r.steps[0]) > k]
+        rows.append([
+            k,
+            len(ok),
+            f"{max(ok):.2f}" if ok else "-",
+            sum(s > attempts.GIVE_UP_SCALE for s in ok),
+            len(bad),
+            f"{min(bad):.2f}" if bad else "-",
+            sum(s > attempts.GIVE_UP_SCALE for s in bad),
+        ])  # fmt: skip
+    return rows
+
+
 def spread(values: list[float]) -> str:
     """``min / median / max`` of ``values``, or ``-``."""
     if not values:
@@ -184,6 +223,9 @@ def report(jobs: list[Job], stem: str) -> None:
     )
     print(table(stage_rows(jobs), ["after stage", "ended sound", "their scale", "ended poor or given up",
                                    "their scales", "sound over give-up", "poor over give-up"]))  # fmt: skip
+    print(f"\nThe first stage's scale after k of its steps (give-up within a stage after {refine.GIVE_UP_STEPS}):")
+    print(table(step_rows(jobs), ["k", "ended sound, still stepping", "largest", "over give-up",
+                                  "poor or given up, still stepping", "smallest", "over give-up"]))  # fmt: skip
     print("\nEach job: its refinements from a start, scale after each stage (= where it ended):")
     print(table(job_rows(jobs), ["case", "wrong turns' seed", "s", "within limits", "refinements"]))
     path = out_dir() / f"{stem}.json"

@@ -308,5 +308,5 @@ def test_a_given_up_fit_is_poor_whatever_its_own_scale() -> None:
     # given up after weighed every row (members' too), and stood over the give-up.
     fit = FakeFit(2.1, np.full(10, 0.02), given_up=2, given_up_scale=12.7)
     why = est.poor_fit(fit)  # type: ignore[arg-type]
-    assert why == "residuals 12.7 times their expected size after the second stage of refinement (given up there)"
+    assert why == "residuals 12.7 times their expected size in the second stage of refinement (given up there)"
     assert est.poor_fit(FakeFit(2.1, np.full(10, 0.02))) is None  # type: ignore[arg-type]

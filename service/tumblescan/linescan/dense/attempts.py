@@ -304,7 +304,7 @@ def poor_fit(fit: DenseFit) -> str | None:
         # surfel pairs alone, may fall under POOR_SCALE where every row's stood over the give-up).
         stage = ("first", "second")[fit.given_up - 1]  # never the last of the three
         return (
-            f"residuals {fit.given_up_scale:.1f} times their expected size after the {stage} stage of refinement "
+            f"residuals {fit.given_up_scale:.1f} times their expected size in the {stage} stage of refinement "
             "(given up there)"
         )
     if not fit.scale <= POOR_SCALE:

@@ -71,6 +71,10 @@ SPIN_ONLY_FREE = (0, 1, 2, 6, 7, 8)
 SURFEL_REFRESH = 0.25
 REMATCH = 0.05
 PROBE_POINTS = 2000
+# A stage that may be given up (refine_dense's give_up_scale) is, once this many of its steps
+# leave the residuals over that scale: a sound start's first stage stood under 2 by then (the
+# real shapes' 120 jobs of seeds 0-9), a wrong one's ran its 15 steps at 30-160.
+GIVE_UP_STEPS = 8
 # Covariance clusters: patches of the target this share of its extent wide (see .covariance).
 CLUSTER_FRACTION = 1 / 10
 
@@ -97,7 +101,7 @@ class DenseFit:
     iterations: int
     scale: float
     members: int = 0  # thin members fitted as lines (:mod:`.beams`)
-    given_up: int = 0  # the stage after which it stopped (``give_up_scale``); 0: every stage ran
+    given_up: int = 0  # the stage in which it stopped (``give_up_scale``); 0: every stage ran
     given_up_scale: float = float("nan")  # that stage's scale, over every row it weighed
 
     @property
@@ -144,7 +148,8 @@ def refine_dense(
     on_iteration(step, max_steps): called after each step; it may raise to stop.
     give_up_scale: stop after any stage but the last that leaves the residuals more than this many
     times their model sigma (a start in another basin, which the later stages do not leave: a
-    caller with another start to try); the fit is then that stage's.
+    caller with another start to try), or within it once ``GIVE_UP_STEPS`` of its steps do; the
+    fit is then that stage's.
     """
     cfg = config or DenseConfig()
     sensor = noise or SensorNoise()
@@ -202,6 +207,7 @@ def refine_dense(
             step=step,
             total=total,
             on_iteration=on_iteration,
+            give_up_scale=give_up_scale if k < len(stages) - 1 else None,
         )
         if k < len(stages) - 1 and give_up_scale is not None and scale > give_up_scale:
             # Seen: 17.6 after the first stage, 22.8 after two more (9 s on the long array at 100 m
@@ -227,10 +233,13 @@ def _iterate(
     step: int,
     total: int,
     on_iteration: Callable[[int, int], None] | None,
+    give_up_scale: float | None = None,
 ) -> tuple[FloatArray, Terms, float, int, float]:
     """Levenberg-Marquardt steps on one set of (source, partner) pairs; ``gate`` is the largest
     distance to a matched surfel's centroid, tightened as the frames come together. Returns the
-    parameters, the terms, the gate, the steps so far and the residuals' last common scale."""
+    parameters, the terms, the gate, the steps so far and the residuals' last common scale.
+    give_up_scale: stop once ``GIVE_UP_STEPS`` steps leave that scale over this (the caller
+    gives the start up)."""
     cfg, data, noise = problem.config, problem.data, problem.noise
     floor = max(5 * noise.range_sigma_m, 1.5 * data.surfel_m)
     probe = _probe(data)
@@ -252,9 +261,11 @@ def _iterate(
     lam = LM_START
     vectors = StepCoords(problem.free)
     scale = float("nan")
-    for _ in range(iterations):
+    for taken_here in range(iterations):
         lin = terms.linearize(data, noise, mapping)
         w, scale = weights(lin)
+        if give_up_scale is not None and taken_here >= GIVE_UP_STEPS and scale > give_up_scale:
+            break
         sw = np.sqrt(w)
         rows = lin.J * sw[:, None]
         # Steps in the rotation vectors (a straight line along the valley of a nearly degenerate
