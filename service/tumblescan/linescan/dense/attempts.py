@@ -36,7 +36,8 @@ POOR_SCALE = 3.0
 # model sigma is given up there when another start remains: the later stages do not leave its
 # basin (the long array at 100 m seed 1: 17.6 after the first stage, 22.8 after 9 s more; every
 # sound refinement of the real-shapes bench's seeds 0-19, 240 jobs, stood at 0.95-1.24 after the
-# first stage, and of seeds 0-9 at 0.37-1.03 after the second: bench.linescan.stage_scales).
+# first stage, and of seeds 0-9 at 0.37-1.03 after the second: bench.linescan.stage_scales);
+# within the stage already once refine.GIVE_UP_STEPS of its steps leave them over it.
 GIVE_UP_SCALE = 3 * POOR_SCALE
 CHECK_FAILED = "the two-frame-count check failed"
 # Below this RMS residual (metres) the data count as noise-free: the paper's fixed threshold applies.
