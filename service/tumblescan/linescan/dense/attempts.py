@@ -252,8 +252,8 @@ def _checked(setup: Setup, attempt: Attempt, n2: int) -> Attempt:
 
 def _solve(setup: Setup, pairs: PairTransforms, start: Start, *, path: str, give_up: bool) -> Solve:
     """From a motion most pairs agree with: re-time and register again, refine on every point
-    (given up after the first or second stage of refinement, if ``give_up``, when that leaves the
-    residuals over ``GIVE_UP_SCALE`` times their size)."""
+    (given up in the first or second stage of refinement, if ``give_up``, when that stage leaves
+    the residuals over ``GIVE_UP_SCALE`` times their size, or 8 of its steps do: ``refine.GIVE_UP_STEPS``)."""
     reg, mid, opts, progress = setup.reg, setup.mid, setup.opts, setup.progress
     # Re-timed registration passes: the in-frame smear no longer biases the rotations, and pairs
     # registered onto a turned copy of the target restart from the predicted transform.

@@ -77,6 +77,8 @@ class LineMapping:
         along either angle of its axis ``l`` (``theta`` its angle, ``dl`` the axis' derivative).
         """
         x, tau = self.x, self.tau_s
+        if not any(p < 6 for p in self.free):
+            return np.zeros((3, len(tau), 0))
         Rp = rotation_matrix(axis_from_angles(x[3], x[4]), x[5] * tau)
         omega: dict[int, FloatArray] = {}
         for first, spun in ((0, True), (3, False)):

@@ -73,8 +73,8 @@ REMATCH = 0.05
 PROBE_POINTS = 2000
 # A stage that may be given up (refine_dense's give_up_scale) is, once this many of its steps
 # leave the residuals over that scale: by then a sound start's first stage stood at 1.25 at most
-# (the real shapes' 120 jobs of seeds 0-9; a wrong start that came back, 3.1), wrong ones' at
-# 22.7 or more, which ran their 15 steps at that (bench.linescan.stage_scales).
+# and its second at 1.04 (the real shapes' 120 jobs of seeds 0-9), wrong starts' first stages at
+# 22.7 or more, which ran their 15 steps at 22-160 before (bench.linescan.stage_scales).
 GIVE_UP_STEPS = 8
 # Covariance clusters: patches of the target this share of its extent wide (see .covariance).
 CLUSTER_FRACTION = 1 / 10
