@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from tumblescan import Scanner, Scene, TimedCloud, estimate_from_frames, random_motion, simulate_frames
-from tumblescan.geometry.rotations import axis_from_angles
+from tumblescan.geometry.rotations import axis_from_angles, axis_tangents
 from tumblescan.linescan.dense import covariance as covariance_mod
 from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
@@ -41,13 +41,6 @@ from ..common import out_dir, table
 from .dense import errors
 from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
 from .truth import dense_data, frames_at_truth
-
-
-def _tangent(x: np.ndarray, a: int, b: int) -> np.ndarray:
-    """d axis / d(angles a, b) at ``x`` (3x2)."""
-    Ja = np.array([-np.sin(x[a]) * np.sin(x[b]), np.cos(x[a]) * np.sin(x[b]), 0.0])
-    Jb = np.array([np.cos(x[a]) * np.cos(x[b]), np.sin(x[a]) * np.cos(x[b]), -np.sin(x[b])])
-    return np.stack([Ja, Jb], axis=1)
 
 
 def sigmas(x_raw: np.ndarray, cov_free: np.ndarray, free: tuple[int, ...]) -> dict[str, float]:
@@ -382,7 +375,7 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
         s = _sig_canonical(x, fit.cov)
         cells: list[object] = ["noise-free" if k < 0 else seed + 1000 * k, rec.get("n", 0), f"{fit.scale:.2f}"]
         for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
-            Jl = _tangent(x, a, b)
+            Jl = axis_tangents(x[a], x[b])
             C = Jl @ fit.cov[np.ix_([a, b], [a, b])] @ Jl.T
             w, V = np.linalg.eigh(C)
             weak = V[:, -1]
@@ -455,7 +448,7 @@ def variant_name(border_only: bool) -> str:
 def _sig_canonical(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
     out = {}
     for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
-        Jl = _tangent(x, a, b)
+        Jl = axis_tangents(x[a], x[b])
         out[p] = float(np.degrees(np.sqrt(max(np.trace(Jl @ cov[np.ix_([a, b], [a, b])] @ Jl.T), 0.0))))
     out["spin_rate"] = float(np.degrees(np.sqrt(cov[2, 2])))
     out["precession_rate"] = float(np.degrees(np.sqrt(cov[5, 5])))

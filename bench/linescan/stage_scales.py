@@ -77,20 +77,22 @@ def recording() -> Iterator[list[Refinement]]:
     made: list[Refinement] = []
     scales: list[float] = []
     steps: list[list[float]] = []  # the current refinement's, per stage
+    stepping = [False]  # within a stage: the weights of the fit's _finish are not a step's
     iterate, weights, refine_dense = refine._iterate, refine.weights, refine.refine_dense
 
     def counted(*args: Any, **kwargs: Any) -> Any:
         steps.append([])
+        stepping[0] = True
         try:
             out = iterate(*args, **kwargs)
         finally:
-            steps.append([])  # closed: the weights of what follows (the fit's _finish) are not a step's
+            stepping[0] = False
         scales.append(float(out[-1]))
         return out
 
     def weighed(*args: Any, **kwargs: Any) -> Any:
         out = weights(*args, **kwargs)
-        if steps:
+        if stepping[0]:
             steps[-1].append(float(out[1]))
         return out
 
@@ -99,8 +101,9 @@ def recording() -> Iterator[list[Refinement]]:
         steps.clear()
         fit = refine_dense(*args, **kwargs)
         full = not kwargs.get("converged", False)
-        per_stage = steps[0::2]
-        made.append(Refinement(list(scales), float(fit.scale), int(fit.given_up), bool(fit.spin_only), full, per_stage))
+        made.append(
+            Refinement(list(scales), float(fit.scale), int(fit.given_up), bool(fit.spin_only), full, list(steps))
+        )
         return fit
 
     saved = [(refine, "_iterate", iterate), (refine, "weights", weights)]
@@ -149,12 +152,18 @@ def job(case: ShapeCase, wrong_seed: int | None, size: int) -> Job:
     return Job(str(case), wrong_seed, seconds, within_limits(errors(result, motion)), made)
 
 
+def sound_and_poor(jobs: list[Job]) -> tuple[list[Refinement], list[Refinement]]:
+    """The jobs' refinements from a start: those that ended sound (at most ``POOR_SCALE``, not
+    given up), and the others."""
+    full = [r for j in jobs for r in j.refinements if r.full]
+    sound = [r for r in full if not r.given_up and r.final <= attempts.POOR_SCALE]
+    return sound, [r for r in full if r not in sound]
+
+
 def stage_rows(jobs: list[Job]) -> list[list[object]]:
     """Per stage: the scales of the full refinements that ended sound and of the others, and how
     many sound ones a give-up at ``GIVE_UP_SCALE`` after that stage would have dropped."""
-    full = [r for j in jobs for r in j.refinements if r.full]
-    sound = [r for r in full if not r.given_up and r.final <= attempts.POOR_SCALE]
-    poor = [r for r in full if r not in sound]
+    sound, poor = sound_and_poor(jobs)
     rows: list[list[object]] = []
     for k in range(STAGES - 1):
         ok = [r.stages[k] for r in sound if len(r.stages) > k]
@@ -175,13 +184,11 @@ def step_rows(jobs: list[Job], after: tuple[int, ...] = (2, 4, 6, 8, 10, 14)) ->
     """The first stage, after ``k`` of its steps: the largest scale of the full refinements that
     ended sound and the smallest of the others, among those still stepping then, and how many of
     each stood over ``GIVE_UP_SCALE`` (what ``refine.GIVE_UP_STEPS`` rests on)."""
-    full = [r for j in jobs for r in j.refinements if r.full and r.steps]
-    sound = [r for r in full if not r.given_up and r.final <= attempts.POOR_SCALE]
-    poor = [r for r in full if r not in sound]
+    sound, poor = sound_and_poor(jobs)
     rows: list[list[object]] = []
     for k in after:
-        ok = [r.steps[0][k] for r in sound if len(r.steps[0]) > k]
-        bad = [r.steps[0][k] for r in poor if len(r.steps[0]) > k]
+        ok = [r.steps[0][k] for r in sound if r.steps and len(r.steps[0]) > k]
+        bad = [r.steps[0][k] for r in poor if r.steps and len(r.steps[0]) > k]
         rows.append([
             k,
             len(ok),

@@ -21,6 +21,15 @@ def axis_from_angles(alpha_rad: ArrayLike, beta_rad: ArrayLike) -> Array:
     return np.stack([np.cos(a) * sb, np.sin(a) * sb, np.cos(b)], axis=-1)
 
 
+def axis_tangents(alpha_rad: float, beta_rad: float) -> Array:
+    """``(3, 2)``: the derivatives of :func:`axis_from_angles` w.r.t. ``alpha`` and ``beta``,
+    ``(-sin a sin b, cos a sin b, 0)`` and ``(cos a cos b, sin a cos b, -sin b)``."""
+    a, b = alpha_rad, beta_rad
+    d_alpha = np.array([-np.sin(a) * np.sin(b), np.cos(a) * np.sin(b), 0.0])
+    d_beta = np.array([np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), -np.sin(b)])
+    return np.stack([d_alpha, d_beta], axis=1)
+
+
 def angles_from_axis(axis: ArrayLike) -> tuple[float, float]:
     """Spherical angles ``(alpha, beta)`` in radians of a (not necessarily unit) axis."""
     v = np.asarray(axis, dtype=float)

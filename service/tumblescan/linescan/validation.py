@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from .._typing import FloatArray
 from ..errors import InvalidOptionError
-from ..geometry.rotations import axis_from_angles
+from ..geometry.rotations import axis_from_angles, axis_tangents
 from ..numerics.derivatives import complex_step
 from ..target.motion import N_PARAMS, canonical_params
 from .tracks import MIN_FRAMES
@@ -48,9 +48,7 @@ def embed(cov_free: FloatArray, free: tuple[int, ...]) -> FloatArray:
 
 def axis_sigma_rad(x: FloatArray, cov9: FloatArray, a: int, b: int) -> float:
     """Total angular 1-sigma of the axis ``(x[a], x[b])``: ``sqrt(trace(J C J^T))``."""
-    Ja = np.array([-np.sin(x[a]) * np.sin(x[b]), np.cos(x[a]) * np.sin(x[b]), 0.0])
-    Jb = np.array([np.cos(x[a]) * np.cos(x[b]), np.sin(x[a]) * np.cos(x[b]), -np.sin(x[b])])
-    Jl = np.stack([Ja, Jb], axis=1)
+    Jl = axis_tangents(x[a], x[b])
     C = cov9[np.ix_([a, b], [a, b])]
     return float(np.sqrt(max(np.trace(Jl @ C @ Jl.T), 0.0)))
 

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._typing import FloatArray, IntArray
-from ...geometry.rotations import axis_from_angles, rotation_matrix
+from ...geometry.rotations import axis_from_angles, axis_tangents, rotation_matrix
 
 # Points mapped to T per chunk of this many (LineMapping.apply): the gathered rotations stay in cache.
 APPLY_CHUNK = 65536
@@ -84,9 +84,8 @@ class LineMapping:
         for first, spun in ((0, True), (3, False)):
             a, b, w = x[first], x[first + 1], x[first + 2]
             l = axis_from_angles(a, b)
-            dl = (np.array([-np.sin(a) * np.sin(b), np.cos(a) * np.sin(b), 0.0]), axis_from_angles(a, b + np.pi / 2))
             theta = w * tau[:, None]
-            for k, d in enumerate(dl):
+            for k, d in enumerate(axis_tangents(a, b).T):
                 omega[first + k] = np.sin(theta) * d + (1 - np.cos(theta)) * np.cross(l, d)
             omega[first + 2] = tau[:, None] * l
             if spun:  # the spin's velocities are carried through the precession

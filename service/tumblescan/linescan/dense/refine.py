@@ -195,6 +195,8 @@ def refine_dense(
     for k, (((src, partner), iterations), beams_on, grazing_on) in enumerate(
         zip(stages, with_beams, with_grazing, strict=True)
     ):
+        # Every stage but the last may be given up: its fit is the refinement's.
+        may_give_up = give_up_scale if k < len(stages) - 1 else None
         z, terms, gate, step, scale = _iterate(
             problem,
             z,
@@ -208,9 +210,9 @@ def refine_dense(
             step=step,
             total=total,
             on_iteration=on_iteration,
-            give_up_scale=give_up_scale if k < len(stages) - 1 else None,
+            give_up_scale=may_give_up,
         )
-        if k < len(stages) - 1 and give_up_scale is not None and scale > give_up_scale:
+        if may_give_up is not None and scale > may_give_up:
             # Seen: 17.6 after the first stage, 22.8 after two more (9 s on the long array at 100 m
             # seed 1), where a sound start's stood at 1.0. A start that matched next to nothing in
             # the first stage passes it (scale 0) and shows after the second (32.1, then 10.0).
