@@ -24,7 +24,7 @@ lint: install
 	$(BIN)/mypy
 
 test: lint
-	$(BIN)/python -m pytest -q
+	rm -f .pytest-running; $(BIN)/python -m pytest -q || { rc=$$?; if [ -f .pytest-running ]; then echo "pytest died (exit $$rc) during $$(cat .pytest-running)" >&2; fi; exit $$rc; }
 
 bench: install
 	$(BIN)/python -m bench.linescan.accuracy

@@ -1,10 +1,14 @@
-"""Headless Chromium for page tests (Debian's chromium, driven by Playwright)."""
+"""Headless Chromium for page tests (Debian's chromium, driven by Playwright's async API).
+
+Async, not sync: the sync API runs its dispatcher in greenlets inside the test process, and a
+C-level abort there would end the whole suite with no test named (CI once died of a SIGABRT
+just after the browser test; the async API needs no greenlet)."""
 
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
@@ -31,16 +35,17 @@ def chromium_path() -> str:
     pytest.skip("no Chromium installed (.ci/run installs Debian's chromium; apt-get install chromium)")
 
 
-@contextmanager
-def browser_page() -> Iterator[Any]:
+@asynccontextmanager
+async def browser_page() -> AsyncIterator[Any]:
+    """A fresh page in headless Chromium; use inside ``asyncio.run``."""
     try:
-        from playwright.sync_api import sync_playwright
+        from playwright.async_api import async_playwright
     except ImportError:
         pytest.skip("playwright is not installed (pip install playwright)")
     path = chromium_path()
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=path, args=ARGS)
+    async with async_playwright() as p:
+        browser = await p.chromium.launch(executable_path=path, args=ARGS)
         try:
-            yield browser.new_page(viewport={"width": 1200, "height": 1400})
+            yield await browser.new_page(viewport={"width": 1200, "height": 1400})
         finally:
-            browser.close()
+            await browser.close()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,6 +24,19 @@ def tracks_for(seed: int, *, noise: bool = True, **scene_kw: object) -> tuple[Mo
     motion = motion_for(seed)
     tracks, _ = simulate_tracks(motion, Scene(noise=noise, **scene_kw), seed=seed)
     return motion, tracks
+
+
+# The test under way, for `make test` to name when the process dies of a signal (a C library's
+# abort): faulthandler's stack of pytest's own frames fills the tail of a CI log and hides it.
+RUNNING = Path(__file__).resolve().parents[1] / ".pytest-running"
+
+
+def pytest_runtest_logstart(nodeid: str, location: tuple[str, int | None, str]) -> None:
+    RUNNING.write_text(nodeid + "\n")
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    RUNNING.unlink(missing_ok=True)
 
 
 @pytest.fixture(autouse=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import subprocess
@@ -75,49 +76,54 @@ def test_report_endpoint_is_one_self_contained_html_file(service: tuple[str, dic
 
 def test_report_and_job_list_in_a_real_browser(service: tuple[str, dict[str, Any]]) -> None:
     url, job = service
-    result = job["result"]
     ARTIFACTS.mkdir(exist_ok=True)
-    with browser_page() as page:
+    asyncio.run(_check_in_browser(url, job))
+
+
+async def _check_in_browser(url: str, job: dict[str, Any]) -> None:
+    result = job["result"]
+    async with browser_page() as page:
         requested: list[str] = []
         page.on("request", lambda req: requested.append(req.url))
-        resp = page.goto(f"{url}/")
+        resp = await page.goto(f"{url}/")
         assert resp.status == 200
         row = page.locator(f"tr[data-job='{job['id']}']")
-        assert "succeeded" in row.inner_text()
-        row.locator("a").click()
-        page.wait_for_selector("#view3d canvas", timeout=30_000)
+        assert "succeeded" in await row.inner_text()
+        await row.locator("a").click()
+        await page.wait_for_selector("#view3d canvas", timeout=30_000)
 
         # The summary shows exactly the API's values.
-        def field(name: str) -> str:
-            return str(page.locator(f"[data-field='{name}']").first.inner_text()).strip()
+        async def field(name: str) -> str:
+            return str(await page.locator(f"[data-field='{name}']").first.inner_text()).strip()
 
-        assert field("spin.rate_deg_s") == f"{result['spin']['rate_deg_s']:.6f}"
-        assert field("precession.rate_deg_s") == f"{result['precession']['rate_deg_s']:.6f}"
-        assert field("model") == result["model"]
-        assert field("spin.axis") == "[" + ", ".join(f"{v:.6f}" for v in result["spin"]["axis"]) + "]"
-        assert field("validation.passed").startswith("passed")
-        assert "points" in field("decimation")
+        assert await field("spin.rate_deg_s") == f"{result['spin']['rate_deg_s']:.6f}"
+        assert await field("precession.rate_deg_s") == f"{result['precession']['rate_deg_s']:.6f}"
+        assert await field("model") == result["model"]
+        assert await field("spin.axis") == "[" + ", ".join(f"{v:.6f}" for v in result["spin"]["axis"]) + "]"
+        assert (await field("validation.passed")).startswith("passed")
+        assert "points" in await field("decimation")
         # The 3D view rendered: a WebGL canvas with varied pixels.
         has_gl = (
             "() => { const c = document.querySelector('#view3d canvas');"
             " return !!(c.getContext('webgl2') || c.getContext('webgl')); }"
         )
-        assert page.evaluate(has_gl)
-        page.wait_for_timeout(1000)
-        png = page.locator("#view3d").screenshot()
+        assert await page.evaluate(has_gl)
+        await page.wait_for_timeout(1000)
+        png = await page.locator("#view3d").screenshot()
         from PIL import Image
 
         colours = Image.open(io.BytesIO(png)).convert("RGB").getcolors(maxcolors=1 << 20)
         assert colours is not None and len(colours) > 50
-        page.screenshot(path=str(ARTIFACTS / "report.png"), full_page=True)
+        await page.screenshot(path=str(ARTIFACTS / "report.png"), full_page=True)
         # Everything came from the service itself: the page works with no internet.
         assert all(u.startswith((url, "data:", "blob:")) for u in requested), [
             u for u in requested if not u.startswith(url)
         ]
-        assert page.locator("#residuals .main-svg").count() >= 1
+        assert await page.locator("#residuals .main-svg").count() >= 1
         # Bad ids get a 404 page, not a traceback.
-        resp = page.goto(f"{url}/jobs/0123456789abcdef0123456789abcdef")
-        assert resp.status == 404 and "Job not found" in page.content() and "Traceback" not in page.content()
+        resp = await page.goto(f"{url}/jobs/0123456789abcdef0123456789abcdef")
+        content = await page.content()
+        assert resp.status == 404 and "Job not found" in content and "Traceback" not in content
 
 
 def test_cli_writes_the_same_report(service: tuple[str, dict[str, Any]], sim: Path, tmp_path: Path) -> None:
