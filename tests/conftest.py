@@ -31,11 +31,11 @@ def tracks_for(seed: int, *, noise: bool = True, **scene_kw: object) -> tuple[Mo
 RUNNING = Path(__file__).resolve().parents[1] / ".pytest-running"
 
 
-def pytest_runtest_logstart(nodeid: str, location: tuple[str, int | None, str]) -> None:
+def pytest_runtest_logstart(nodeid: str) -> None:
     RUNNING.write_text(nodeid + "\n")
 
 
-def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+def pytest_sessionfinish() -> None:
     RUNNING.unlink(missing_ok=True)
 
 

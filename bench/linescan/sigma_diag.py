@@ -34,21 +34,19 @@ from tumblescan.linescan.dense import covariance as covariance_mod
 from tumblescan.linescan.dense import refine as refine_mod
 from tumblescan.linescan.dense import surfels as surfels_mod
 from tumblescan.linescan.frames import assemble_frames
-from tumblescan.linescan.validation import canonical_cov
-from tumblescan.target.motion import N_PARAMS, canonical_params
+from tumblescan.linescan.validation import canonical_cov, embed
+from tumblescan.target.motion import canonical_params
 
 from ..common import out_dir, table
 from .dense import errors
+from .dense_bound import motion_sigmas_deg
 from .real_shapes import FLOOR, PARAMS, UNITS, against_bound, shape_named
 from .truth import dense_data, frames_at_truth
 
 
 def sigmas(x_raw: np.ndarray, cov_free: np.ndarray, free: tuple[int, ...]) -> dict[str, float]:
     """The result's four 1-sigmas (deg, deg/s) from the free parameters' covariance at ``x_raw``."""
-    cov9 = np.zeros((N_PARAMS, N_PARAMS))
-    idx = np.array(free)
-    cov9[np.ix_(idx, idx)] = cov_free
-    return _sig_canonical(canonical_params(x_raw), canonical_cov(x_raw, cov9))
+    return motion_sigmas_deg(canonical_params(x_raw), canonical_cov(x_raw, embed(cov_free, free)))
 
 
 @contextmanager
@@ -372,7 +370,7 @@ def draws(name: str, distance_m: float, seed: int, size: int, n_draws: int, vari
             surfels_mod.assign_to_faces, surfels_mod.CURVATURE_CORRECTION = handover, curvature
             refine_mod.build_surfels = build
         x = fit.x
-        s = _sig_canonical(x, fit.cov)
+        s = motion_sigmas_deg(x, fit.cov)
         cells: list[object] = ["noise-free" if k < 0 else seed + 1000 * k, rec.get("n", 0), f"{fit.scale:.2f}"]
         for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
             Jl = axis_tangents(x[a], x[b])
@@ -443,16 +441,6 @@ def _eroded(surf: Any, data: Any, *, border_only: bool) -> Any:
 
 def variant_name(border_only: bool) -> str:
     return "erode-border" if border_only else "erode"
-
-
-def _sig_canonical(x: np.ndarray, cov: np.ndarray) -> dict[str, float]:
-    out = {}
-    for p, (a, b) in (("spin_axis", (0, 1)), ("precession_axis", (3, 4))):
-        Jl = axis_tangents(x[a], x[b])
-        out[p] = float(np.degrees(np.sqrt(max(np.trace(Jl @ cov[np.ix_([a, b], [a, b])] @ Jl.T), 0.0))))
-    out["spin_rate"] = float(np.degrees(np.sqrt(cov[2, 2])))
-    out["precession_rate"] = float(np.degrees(np.sqrt(cov[5, 5])))
-    return out
 
 
 def main() -> None:
