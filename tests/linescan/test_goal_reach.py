@@ -3,9 +3,19 @@ the resampled benches, against cases worked by hand."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
-from bench.linescan.goal_reach import Reach, count_distribution, goal_met_exactly, goal_met_resampled, summary
+from bench.linescan.goal_reach import (
+    INFLATIONS,
+    Reach,
+    count_distribution,
+    goal_met_exactly,
+    goal_met_resampled,
+    inflation_rows,
+    summary,
+)
 
 
 def test_count_distribution_is_the_binomial_when_every_case_is_alike() -> None:
@@ -46,3 +56,22 @@ def test_summary_multiplies_the_shapes_odds() -> None:
     assert rows[1][-1] == "80 %"
     assert everything["planes"]["bench seeds"] == pytest.approx(goal_met_exactly(np.full(20, 0.95)))
     assert everything["known_shape"]["bench seeds"] == pytest.approx(1.0)
+
+
+def test_inflation_rows_give_each_factors_share_and_odds_on_the_swept_motions() -> None:
+    shares = dict(zip(map(str, INFLATIONS), (0.98, 0.96, 0.9, 0.8), strict=True))
+    reaches = [
+        Reach("a", distance, seed, planes=0.99, known_shape=1.0, inflated=shares)
+        for distance in (50.0, 100.0)
+        for seed in range(10)
+    ]
+    # A sweep saved before the inflated shares were measured has no row.
+    reaches += [Reach("old", 50.0, seed, planes=0.99, known_shape=1.0) for seed in range(10)]
+    rows, at_once = inflation_rows(reaches + [replace(r, shape="b") for r in reaches[:20]], {"a": 0.9})
+    assert len(rows) == 2
+    name, cases, *columns, ours = rows[0]
+    assert (name, cases, ours) == ("a", 20, "90.0 %")
+    expected = [0.99, 0.98, 0.96, 0.9, 0.8]
+    assert columns == [f"{100 * p:.1f} % ({goal_met_exactly(np.full(20, p)):.2f})" for p in expected]
+    # Two alike shapes: every shape at once is the square of one's odds.
+    assert at_once == pytest.approx([goal_met_exactly(np.full(20, p)) ** 2 for p in expected])
