@@ -177,4 +177,56 @@ def test_simulate_a_mesh_file_and_its_mistakes(tmp_path: Path) -> None:
     proc = run(*args, "--mesh", str(tmp_path / "target.obj"))
     assert proc.returncode == 2 and proc.stderr == "error: --mesh needs --size-m (its largest side in metres)\n"
     proc = run(*args, "--mesh", str(tmp_path / "none.obj"), "--size-m", "3")
-    assert proc.returncode == 2 and "no such mesh file" in proc.stderr
+    assert proc.returncode == 2 and proc.stderr == f"error: --mesh: no such file: {tmp_path / 'none.obj'}\n"
+
+
+def one_line_refusal(proc: subprocess.CompletedProcess[str], says: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1 and says in proc.stderr, proc.stderr
+
+
+def test_simulate_refuses_a_target_it_cannot_scan_naming_the_option(tmp_path: Path) -> None:
+    (tmp_path / "flat.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n0 0 0\n0 0 0\n3 0 1 2\n"
+    )
+    (tmp_path / "a-file").write_text("")
+    out = tmp_path / "sim"
+    small = ("linescan-motion", "simulate", "--out", str(out), "--lines", "32", "--pixels", "32", "--frames", "4")
+    cases = [
+        (("--spin-rate-deg-s", "nan"), "--spin-rate-deg-s must be a finite number"),
+        (("--range-m", "inf"), "--range-m must be a finite number"),
+        (("--range-m", "1000000"), "--range-m: 1e+06 m is beyond the scanner's maximum range (1000 m)"),
+        (("--range-m", "1"), "sees too few of the target's corners at 1 m: check --size-m and --range-m"),
+        (("--mesh", str(tmp_path / "flat.ply"), "--size-m", "5"), "every triangle has zero area"),
+        (("--mesh", str(tmp_path), "--size-m", "5"), f"--mesh: {tmp_path} is a directory"),
+    ]
+    for extra, says in cases:
+        one_line_refusal(run(*small, *extra), says)
+    # Nothing is written for a target out of view.
+    assert not out.exists()
+    one_line_refusal(run(*small, "--out", str(tmp_path / "a-file")), "--out: ")
+
+
+def test_estimate_refuses_options_that_would_do_nothing_before_the_work(sim: Path, tmp_path: Path) -> None:
+    tracks, frames = str(sim / "tracks.json"), str(sim / "frames.ply")
+    one_line_refusal(run("estimate", tracks, "--truth", str(sim / "truth.json")), "--truth goes with --report")
+    one_line_refusal(run("estimate", tracks, "--rectified", str(tmp_path / "r.ply")), "--rectified goes with --cloud")
+    one_line_refusal(
+        run("estimate", tracks, "--report", str(tmp_path / "no" / "r.html")),
+        f"--report: the directory {tmp_path / 'no'} does not exist",
+    )
+    # The frames carry their frame indices: a frame period would be ignored.
+    one_line_refusal(run("estimate", frames, "--frame-period-s", "0.5"), "'frame' property")
+    (tmp_path / "c.json").write_text("{}")
+    one_line_refusal(run("estimate", tracks, "--cloud", str(tmp_path / "c.json")), "cloud c.json: not a PLY file")
+
+
+def test_rectify_refuses_a_reference_time_far_from_the_cloud(sim: Path, tmp_path: Path) -> None:
+    result = run("estimate", str(sim / "tracks.json"), "--json")
+    assert result.returncode == 0, result.stderr
+    (tmp_path / "m.json").write_text(result.stdout)
+    args = ("rectify", str(sim / "frames.ply"), "--motion", str(tmp_path / "m.json"), "--out", str(tmp_path / "r.ply"))
+    one_line_refusal(run(*args, "--reference-time-s", "nan"), "--reference-time-s must be a finite number")
+    one_line_refusal(run(*args, "--reference-time-s", "1e300"), "--reference-time-s: 1e+300 s lies too far")
+    assert not (tmp_path / "r.ply").exists()

@@ -44,7 +44,8 @@ def test_outputs_that_could_only_fail_later_are_refused_first(tmp_path: Path) ->
     # Port 9 has no service: each refusal comes before the client is used.
     f = tmp_path / "tracks.json"
     f.write_text("{}")
-    one_error_line(submit(str(f), "--wait", "--timeout", "0"), "--timeout must be more than 0 s")
+    for timeout in ("0", "nan", "inf"):
+        one_error_line(submit(str(f), "--wait", "--timeout", timeout), "--timeout must be a finite number of seconds")
     one_error_line(submit(str(f), "--out", str(tmp_path / "x.ply")), "--out needs --wait")
     one_error_line(submit(str(f), "--artifacts", str(tmp_path / "a")), "--artifacts needs --wait")
     one_error_line(submit(str(f), "--wait", "--out", str(tmp_path)), "is a directory")

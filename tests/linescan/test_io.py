@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -201,6 +202,12 @@ def test_big_endian_and_ascii_ply_are_read(tmp_path: Path) -> None:
     ascii_head = head.replace("binary_big_endian", "ascii")
     (tmp_path / "a.ply").write_text(ascii_head + "1 2 3 0.5\n4 5 6 0.75\n")
     assert np.array_equal(read_ply(tmp_path / "a.ply").t_s, t)
+    # No vertices, no body: an empty cloud, as from a binary PLY, without numpy's warning.
+    (tmp_path / "empty.ply").write_text(ascii_head.replace("vertex 2", "vertex 0"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        empty = read_ply(tmp_path / "empty.ply")
+    assert len(empty) == 0 and empty.xyz_m.shape == (0, 3)
 
 
 def test_bad_ply_files_get_specific_errors(tmp_path: Path) -> None:
@@ -249,6 +256,11 @@ GOOD_MOTION = {
         (b"\xff\xfe not json", "truth", "not valid JSON"),
         (b"[1, 2]", "truth", "no 'motion'"),
         (json.dumps({"motion": {**GOOD_MOTION, "spin_axis": [0, 1]}}).encode(), "truth.motion.spin_axis", "3 finite"),
+        (
+            json.dumps({"motion": {**GOOD_MOTION, "precession_axis": [0, 0, 0]}}).encode(),
+            "truth.motion.precession_axis",
+            "zero vector",
+        ),
         (
             json.dumps({"motion": {k: v for k, v in GOOD_MOTION.items() if k != "precession_rate_deg_s"}}).encode(),
             "truth.motion.precession_rate_deg_s",

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import io
 import json
+import re
 import subprocess
 import sys
 import time
@@ -16,8 +18,13 @@ import httpx
 import pytest
 
 from tumblescan import Scanner, Scene, TimedCloud, simulate_frames, simulate_tracks, write_ply
+from tumblescan.linescan.options import FramesOptions, TracksOptions
+from tumblescan.linescan.pipeline import Outcome, estimate_frames, estimate_tracks
+from tumblescan.linescan.report import ReportInputs, build_report
+from tumblescan.linescan.report_text import fit_text
 from tumblescan.linescan.tracks_io import write_tracks
-from tumblescan.linescan.truth import motion_to_json
+from tumblescan.linescan.truth import errors_against, load_truth, motion_to_json
+from tumblescan.target.motion import Motion
 
 from ..browser import browser_page
 from ..conftest import motion_for
@@ -181,3 +188,82 @@ def test_pages_need_a_key_and_show_only_the_keys_jobs(tmp_path: Path, sim: Path)
             # The key is kept in a cookie for the links that follow.
             assert browser.get(f"/jobs/{ids['alpha']}").status_code == 200
             assert browser.get(f"/jobs/{ids['beta']}").status_code == 404
+
+
+# The summary of a report built in-process from the simulated job, frames and tracks alike.
+
+
+@pytest.fixture(scope="module")
+def frames_outcome(sim: Path) -> Outcome:
+    return estimate_frames(sim / "frames.ply", FramesOptions())
+
+
+@pytest.fixture(scope="module")
+def tracks_outcome(sim: Path) -> Outcome:
+    return estimate_tracks(sim / "tracks.json", TracksOptions())
+
+
+def _report(outcome: Outcome, truth: Motion | None) -> str:
+    inputs = ReportInputs(
+        result=outcome.result,
+        tracks=outcome.tracks,
+        distorted=outcome.cloud,
+        rectified=outcome.rectified,
+        truth=truth,
+    )
+    return build_report(inputs)
+
+
+def _cell(page: str, field: str) -> tuple[str, str]:
+    """The attributes after ``data-field`` and the text of a report's cell."""
+    m = re.search(rf"""data-field='{re.escape(field)}'([^>]*)>(.*?)</td>""", page)
+    assert m, f"no cell {field}"
+    return m.group(1), m.group(2)
+
+
+def test_frames_report_fit_row_says_the_points_used(frames_outcome: Outcome, sim: Path) -> None:
+    r = frames_outcome.result
+    assert r.fit.source == "frames" and r.fit.points_used is not None
+    _, fit = _cell(_report(frames_outcome, load_truth(sim / "truth.json")), "fit.rms_residual_m")
+    assert f"{r.fit.points_used} of {r.fit.observations} points" in fit
+    assert "surfel-to-plane" in fit and "tracks" not in fit and "observations" not in fit
+    # The words the CLI prints (``fit_text``), lengths in mm rather than m.
+    assert fit == fit_text(r.fit, "mm") and fit_text(r.fit).startswith(f"rms {r.fit.rms_residual_m:.3g} m ")
+
+
+def test_tracks_report_fit_row_keeps_the_tracks_wording(tracks_outcome: Outcome) -> None:
+    r = tracks_outcome.result
+    _, fit = _cell(_report(tracks_outcome, None), "fit.rms_residual_m")
+    assert f"{r.fit.observations} observations, {r.fit.tracks} tracks, {r.fit.frames} frames" in fit
+    assert " of " not in fit and r.fit.tracks > 0
+    assert fit == fit_text(r.fit, "mm")
+
+
+@pytest.mark.parametrize("source", ["frames", "tracks"])
+def test_centre_sigma_and_error_are_both_in_mm(
+    source: str, frames_outcome: Outcome, tracks_outcome: Outcome, sim: Path
+) -> None:
+    outcome = frames_outcome if source == "frames" else tracks_outcome
+    truth = load_truth(sim / "truth.json")
+    page = _report(outcome, truth)
+    row = re.search(r"<tr><th>centre \(m\)</th>.*?</tr>", page)
+    assert row, "no centre row"
+    _, sigma, _, error = re.findall(r"<td[^>]*>(.*?)</td>", row.group(0))
+    assert sigma.endswith(" mm")
+    error_mm = errors_against(outcome.result, truth)["center_m"] * 1000
+    assert _cell(page, "error.precession.center_m")[1] == f"{error_mm:.3g} mm" == error
+    # Axis errors carry their sigma's unit too.
+    assert _cell(page, "error.spin.axis")[1].endswith(" deg")
+
+
+def test_nutation_error_against_the_truth(frames_outcome: Outcome, sim: Path) -> None:
+    r = frames_outcome.result
+    truth = load_truth(sim / "truth.json")
+    assert r.nutation_angle_deg is not None
+    attrs, error = _cell(_report(frames_outcome, truth), "error.nutation_angle_deg")
+    assert error == f"{r.nutation_angle_deg - truth.nutation_angle_deg():.3g}" and "title" not in attrs
+    assert abs(float(error)) < 1.0
+    # A truth without precession has no nutation angle: a dash, and why.
+    still = dataclasses.replace(truth, precession_rate_rad_s=0.0)
+    attrs, error = _cell(_report(frames_outcome, still), "error.nutation_angle_deg")
+    assert error == "&ndash;" and "no precession" in attrs

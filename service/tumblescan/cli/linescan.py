@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -46,24 +47,39 @@ def simulate(
     pixels: Annotated[int, typer.Option(min=1, max=8192)] = 512,
     dense: Annotated[bool, typer.Option(help="also cast every ray into frames.ply")] = True,
 ) -> None:
-    """Simulate a tumbling satellite: writes tracks.json, frames.ply and truth.json."""
+    """Simulate a tumbling satellite: writes tracks.json, frames.ply, reference.ply (the frames'
+    points without the motion's smear) and truth.json."""
     import numpy as np
 
     from ..io.ply import TimedCloud, write_ply
+    from ..linescan.errors import SingleObservationTrackError, TooFewTracksError
     from ..linescan.sensor import Scanner
     from ..linescan.simulate import Scene, random_motion, simulate_frames, simulate_tracks
     from ..linescan.tracks_io import write_tracks
     from ..linescan.truth import motion_to_json
 
+    _finite(distance_m=distance_m, size_m=size_m, spin_rate_deg_s=spin_rate_deg_s,
+            precession_rate_deg_s=precession_rate_deg_s)  # fmt: skip
+    scanner = Scanner(lines=lines, pixels=pixels)
+    if distance_m > scanner.max_range_m:
+        raise InputError(
+            f"--range-m: {distance_m:g} m is beyond the scanner's maximum range ({scanner.max_range_m:g} m)",
+            field="distance_m",
+        )
     rng = np.random.default_rng(seed)
     ws = (spin_rate_deg_s, spin_rate_deg_s) if spin_rate_deg_s is not None else (15.0, 37.0)
     wp = (precession_rate_deg_s, precession_rate_deg_s) if precession_rate_deg_s is not None else (3.0, 14.0)
     motion = random_motion(rng, distance_m=distance_m, spin_rate_deg_s=ws, precession_rate_deg_s=wp)
-    scene = Scene(
-        scanner=Scanner(lines=lines, pixels=pixels), frames=frames, noise=noise, shape=_shape(shape, mesh, size_m)
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    tracks, track_truth = simulate_tracks(motion, scene, seed=seed)
+    scene = Scene(scanner=scanner, frames=frames, noise=noise, shape=_shape(shape, mesh, size_m))
+    # Everything is simulated before anything is written: a target out of view leaves no files.
+    try:
+        tracks, track_truth = simulate_tracks(motion, scene, seed=seed)
+    except (TooFewTracksError, SingleObservationTrackError):
+        raise InputError(_out_of_view(distance_m, "too few of the target's corners"), field="distance_m") from None
+    cloud = simulate_frames(motion, scene, seed=seed) if dense else None
+    if cloud is not None and len(cloud.t_s) == 0:
+        raise InputError(_out_of_view(distance_m, "no part of the target"), field="distance_m")
+    _output_directory(out)
     write_tracks(out / "tracks.json", tracks)
     truth = {"motion": motion_to_json(motion), "scene": scene.model_dump(mode="json"), "seed": seed}
     truth["corners_reference_m"] = track_truth.corners_reference_m.tolist()
@@ -71,8 +87,7 @@ def simulate(
         f"wrote {out / 'tracks.json'} ({len(tracks)} observations of {tracks.n_tracks} corners "
         f"in {tracks.n_frames} frames)"
     )
-    if dense:
-        cloud = simulate_frames(motion, scene, seed=seed)
+    if cloud is not None:
         fields: dict[str, np.ndarray] = {"frame": cloud.frame, "line": cloud.line, "pixel": cloud.pixel}
         write_ply(out / "frames.ply", TimedCloud(cloud.xyz_m, cloud.t_s, fields))
         write_ply(
@@ -84,10 +99,45 @@ def simulate(
     typer.echo(f"wrote {out / 'truth.json'}")
 
 
+def _finite(**values: float | None) -> None:
+    """Options given as NaN or infinity (typer's bounds let them through): refused by name."""
+    for name, value in values.items():
+        if value is not None and not math.isfinite(value):
+            option = "range-m" if name == "distance_m" else name.replace("_", "-")
+            raise InputError(f"--{option} must be a finite number, not {value}", field=name)
+
+
+def _out_of_view(distance_m: float, what: str) -> str:
+    return (
+        f"the scanner sees {what} at {distance_m:g} m: check --size-m and --range-m (the target "
+        "must lie in front of the scanner and fill part of its field of view)"
+    )
+
+
+def _output_directory(out: Path) -> None:
+    """``--out`` made if missing; a file or an unwritable place refused by name."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out: {out} is a file, not a directory", field="out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot make the directory {out} ({exc.strerror or exc})", field="out") from None
+
+
+def _output_file(path: Path | None, option: str) -> None:
+    """An output file's place checked before the work: its directory exists, it is no directory."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise InputError(f"--{option}: {path} is a directory; give a file name", field=option)
+    if not path.parent.is_dir():
+        raise InputError(f"--{option}: the directory {path.parent} does not exist", field=option)
+
+
 @app.command()
 @input_errors
 def estimate(
-    tracks_file: Annotated[Path, typer.Argument(help="tracks (JSON, CSV) or dense frames (PLY, NPZ)")],
+    input_file: Annotated[Path, typer.Argument(help="tracks (JSON, CSV) or dense frames (PLY, NPZ)")],
     strategy: Annotated[Strategy | None, typer.Option(help="tracks: auto, lm or swarm (default auto)")] = None,
     objective: Annotated[Objective | None, typer.Option(help="tracks: ml or pairwise (default ml)")] = None,
     model: Annotated[ModelChoice, typer.Option()] = "auto",
@@ -108,7 +158,7 @@ def estimate(
         ),
     ] = None,
     frame_period_s: Annotated[
-        float | None, typer.Option(min=0.0, help="frames input without frame indices: the scanner's frame period")
+        float | None, typer.Option(help="frames input without frame indices: the scanner's frame period (> 0)")
     ] = None,
 ) -> None:
     """Estimate the motion from feature tracks or dense frames and print it; frames (and a
@@ -116,19 +166,26 @@ def estimate(
     from ..linescan.options import FramesOptions, TracksOptions
     from ..linescan.pipeline import estimate_frames, estimate_tracks, input_form
 
-    form = input_form(tracks_file)
+    # Options that would do nothing, and outputs with nowhere to go, are refused before the work.
+    if truth is not None and report is None:
+        raise InputError("--truth goes with --report (the report shows the truth beside the estimate)", field="truth")
+    for path, option in ((report, "report"), (rectified, "rectified")):
+        _output_file(path, option)
+    form = input_form(input_file)
     common: dict[str, Any] = {"model": model, "reference_time_s": reference_time_s, "seed": seed}
     if form == "frames":
         _refuse_for_frames(strategy=strategy, objective=objective, cloud=cloud)
         sensor = _sensor(None, range_sigma_m, angle_sigma_arcsec)
         frames_options = FramesOptions(**common, sensor=sensor, frame_period_s=frame_period_s)
         with json_stdout(as_json):
-            outcome = estimate_frames(tracks_file, frames_options)
-        out: Path | None = rectified or tracks_file.with_name(tracks_file.stem + "-rectified.ply")
+            outcome = estimate_frames(input_file, frames_options)
+        out: Path | None = rectified or input_file.with_name(input_file.stem + "-rectified.ply")
     else:
         if frame_period_s is not None:
             raise InputError("--frame-period-s applies to frames input, not to tracks", field="frame_period_s")
-        declared = _declared_noise(tracks_file) if range_sigma_m is not None or angle_sigma_arcsec is not None else None
+        if rectified is not None and cloud is None:
+            raise InputError("--rectified goes with --cloud for tracks input (the cloud to rectify)", field="rectified")
+        declared = _declared_noise(input_file) if range_sigma_m is not None or angle_sigma_arcsec is not None else None
         tracks_options = TracksOptions(
             **common,
             strategy=strategy or "auto",
@@ -136,9 +193,9 @@ def estimate(
             sensor=_sensor(declared, range_sigma_m, angle_sigma_arcsec),
         )
         with json_stdout(as_json):
-            outcome = estimate_tracks(tracks_file, tracks_options, cloud_path=cloud)
+            outcome = estimate_tracks(input_file, tracks_options, cloud_path=cloud)
         out = rectified or (cloud.with_name(cloud.stem + "-rectified.ply") if cloud is not None else None)
-    _write_outputs(outcome, tracks_file, out, report, truth)
+    _write_outputs(outcome, input_file, out, report, truth)
     _print_result(outcome.result, as_json=as_json)
 
 
@@ -154,8 +211,10 @@ def _shape(name: str, mesh: Path | None, size_m: float | None) -> Any:
         raise InputError("give --shape or --mesh, not both", field="mesh")
     if size_m is None:
         raise InputError("--mesh needs --size-m (its largest side in metres)", field="size_m")
+    if mesh.is_dir():
+        raise InputError(f"--mesh: {mesh} is a directory, not a mesh file", field="mesh")
     if not mesh.is_file():
-        raise InputError(f"no such mesh file: {mesh}", field="mesh")
+        raise InputError(f"--mesh: no such file: {mesh}", field="mesh")
     return MeshFileShape(path=str(mesh.resolve()), size_m=size_m)
 
 
@@ -232,9 +291,20 @@ def rectify(
     from ..io.ply import TimedCloud, read_ply, write_ply
     from ..linescan.rectify import rectify as rectify_points
 
+    _finite(reference_time_s=reference_time_s)
+    _output_file(out, "out")
     result = load_result(motion)
     cloud = read_ply(cloud_file)
-    target = float(cloud.t_s.min()) if reference_time_s is None and len(cloud) else (reference_time_s or 0.0)
+    t_first, t_last = (float(cloud.t_s.min()), float(cloud.t_s.max())) if len(cloud) else (0.0, 0.0)
+    target = t_first if reference_time_s is None else reference_time_s
+    # As for an estimate's reference time: a far one turns the motion's phase into noise.
+    reach_s = max(t_last - t_first, 1.0)
+    if not t_first - reach_s <= target <= t_last + reach_s:
+        raise InputError(
+            f"--reference-time-s: {target:g} s lies too far from the cloud's times ({t_first:g} to {t_last:g} s): "
+            f"keep it within {reach_s:g} s of them",
+            field="reference_time_s",
+        )
     xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=target)
     write_ply(out, TimedCloud(xyz, cloud.t_s, cloud.fields))
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")
@@ -256,6 +326,7 @@ def load_result(path: Path) -> MotionResult:
 
 def format_result(r: MotionResult) -> str:
     """A short human-readable summary with 1-sigma values."""
+    from ..linescan.report_text import fit_text
     from ..report.html import sigmas_text
 
     u = r.uncertainty
@@ -272,7 +343,7 @@ def format_result(r: MotionResult) -> str:
         ]
     lines += [
         f"centre           {_vec(r.precession.center_m)} m  +- {sigmas_text(u.center_m, 1000)} mm",
-        _fit_line(r),
+        f"fit              {fit_text(r.fit)}",
         f"validation       {'passed' if r.validation.passed else 'FAILED'} "
         f"({r.validation.test}, frames {r.validation.frames})",
         f"solver           {r.solver.path}, {r.solver.iterations} evaluations, {r.solver.attempts} attempt(s), "
@@ -280,21 +351,6 @@ def format_result(r: MotionResult) -> str:
     ]
     lines += [f"warning          {w}" for w in r.warnings]
     return "\n".join(lines)
-
-
-def _fit_line(r: MotionResult) -> str:
-    f = r.fit
-    if f.source == "frames":
-        worst = max(((v, i) for i, v in enumerate(f.frame_rms_m or []) if v is not None), default=None)
-        tail = f", worst frame {worst[1]} ({worst[0]:.3g} m)" if worst else ""
-        return (
-            f"fit              rms {f.rms_residual_m:.3g} m surfel-to-plane, {f.points_used} of "
-            f"{f.observations} points, {f.frames} frames{tail}"
-        )
-    return (
-        f"fit              rms {f.rms_residual_m:.3g} m over {f.observations} observations, "
-        f"{f.tracks} tracks, {f.frames} frames, {f.outliers} outliers"
-    )
 
 
 def _vec(v: Any, digits: int = 6) -> str:

@@ -271,8 +271,8 @@ def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path
     """Refuse, before anything is submitted, what could only fail (or be ignored) after the
     job has run: outputs without --wait, a timeout that cannot be waited, targets that cannot
     be written."""
-    if timeout <= 0:
-        raise fail(f"--timeout must be more than 0 s (got {timeout:g})")
+    if not 0 < timeout < float("inf"):  # NaN too
+        raise fail(f"--timeout must be a finite number of seconds over 0 (got {timeout:g})")
     for flag, given in (("--out", out), ("--artifacts", artifacts)):
         if given is not None and not wait:
             raise fail(f"{flag} needs --wait (the files exist once the job has succeeded)")

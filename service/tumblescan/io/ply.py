@@ -181,7 +181,12 @@ def _int(s: str) -> int:
 def _read_vertices(p: Path, h: _Header) -> np.ndarray:
     if h.fmt == "ascii":
         try:
-            rows = np.loadtxt(p, skiprows=_header_lines(p), max_rows=h.count, ndmin=2, dtype=float)
+            # No vertices, no body: loadtxt would warn of empty input and give a 1-row shape.
+            rows = (
+                np.empty((0, len(h.dtype.names or ())))
+                if h.count == 0
+                else np.loadtxt(p, skiprows=_header_lines(p), max_rows=h.count, ndmin=2, dtype=float)
+            )
         except ValueError as exc:
             raise MalformedInputError(f"ASCII PLY body is malformed: {exc}", field="file") from None
         if rows.shape != (h.count, len(h.dtype.names or ())):

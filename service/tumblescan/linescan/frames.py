@@ -81,6 +81,12 @@ def assemble_frames(cloud: TimedCloud, *, frame_period_s: float | None = None) -
 
 def _frames(cloud: TimedCloud, frame_period_s: float | None) -> NDArray[np.int64]:
     if "frame" in cloud.fields:
+        if frame_period_s is not None:
+            # Given both, one would be ignored: the user who gave the period expects it used.
+            raise MalformedInputError(
+                "the points carry a 'frame' property, which sets the frames: a frame period applies only without it",
+                field="frame_period_s",
+            )
         f = np.asarray(cloud.fields["frame"])
         if not np.issubdtype(f.dtype, np.integer) or (f < 0).any():
             raise MalformedInputError("the 'frame' property must hold non-negative integers", field="frame")

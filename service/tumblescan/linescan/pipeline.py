@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from .._typing import Progress, no_progress
-from ..errors import MalformedInputError
+from ..errors import InputError, MalformedInputError
 from ..io.ply import TimedCloud, read_ply
 from ..io.sniff import sniff
 from .options import FramesOptions, TracksOptions
@@ -60,17 +60,25 @@ def estimate_tracks(
     from .sparse.estimate import estimate_motion
     from .tracks_io import read_tracks
 
-    # 1. Read and validate the tracks.
+    # 1. Read and validate the tracks, and the cloud before the work: a bad cloud fails at once.
     progress("loading", 0.0)
     tracks = read_tracks(tracks_path)
+    cloud = _read_cloud(cloud_path) if cloud_path is not None else None
     # 2. Estimate, reporting through the attempts (each report is a cancellation point).
     result = estimate_motion(tracks, options, progress=lambda stage, f: progress(stage, 0.02 + 0.9 * f))
-    if cloud_path is None:
+    if cloud is None:
         return Outcome(result, None, None, tracks)
     # 3. Rectify the cloud that came with the tracks.
     progress("rectifying", 0.93)
-    cloud = read_ply(cloud_path)
     return Outcome(result, cloud, rectified(cloud, result), tracks)
+
+
+def _read_cloud(path: Path) -> TimedCloud:
+    """The cloud that comes with tracks; its errors name it (the tracks are the main input)."""
+    try:
+        return read_ply(path)
+    except InputError as exc:
+        raise type(exc)(f"cloud {path.name}: {exc}", field="cloud") from None
 
 
 def estimate_frames(path: Path, options: FramesOptions, *, progress: Progress = no_progress) -> Outcome:

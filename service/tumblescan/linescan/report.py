@@ -17,6 +17,7 @@ from ..io.ply import TimedCloud
 from ..report import figure_html, page, sigmas_text, value_text
 from ..target.motion import Motion
 from .rectify import rectify
+from .report_text import fit_text
 from .result import MotionResult
 from .tracks import Tracks
 from .truth import errors_against
@@ -82,20 +83,27 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
     u = r.uncertainty
     err = errors_against(r, truth) if truth is not None else {}
     t = truth.at_reference(r.reference_time_s) if truth is not None else None
+    # The truth's nutation angle needs its precession: with a zero rate its axis is arbitrary.
+    true_nutation = None
+    if truth is not None and truth.precession_rate_rad_s != 0:
+        true_nutation = truth.canonical().nutation_angle_deg()
+        if r.nutation_angle_deg is not None:
+            err["nutation_angle_deg"] = r.nutation_angle_deg - true_nutation
     rows = [
-        _Row("spin axis", "spin.axis", r.spin.axis, f"{u.spin_axis_deg:.3g} deg", t and t.spin_axis, "spin_axis_deg"),
+        _Row("spin axis", "spin.axis", r.spin.axis, f"{u.spin_axis_deg:.3g} deg", t and t.spin_axis, "spin_axis_deg",
+             error_unit="deg"),
         _Row("spin rate (deg/s)", "spin.rate_deg_s", r.spin.rate_deg_s, f"{u.spin_rate_deg_s:.3g}",
              t and float(np.degrees(t.spin_rate_rad_s)), "spin_rate_deg_s"),
     ]  # fmt: skip
     if r.precession.axis is not None:
         rows += [
             _Row("precession axis", "precession.axis", r.precession.axis, f"{u.precession_axis_deg:.3g} deg",
-                 t and t.precession_axis, "precession_axis_deg"),
+                 t and t.precession_axis, "precession_axis_deg", error_unit="deg"),
             _Row("precession rate (deg/s)", "precession.rate_deg_s", r.precession.rate_deg_s,
                  f"{u.precession_rate_deg_s:.3g}", t and float(np.degrees(t.precession_rate_rad_s)),
                  "precession_rate_deg_s"),
-            _Row("nutation angle (deg)", "nutation_angle_deg", r.nutation_angle_deg, "",
-                 t and t.nutation_angle_deg(), ""),
+            _Row("nutation angle (deg)", "nutation_angle_deg", r.nutation_angle_deg, "", true_nutation,
+                 "nutation_angle_deg", no_error="the truth has no precession (rate 0), so no nutation angle"),
         ]  # fmt: skip
     rows.append(
         _Row(
@@ -105,6 +113,8 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
             sigmas_text(u.center_m, 1000) + " mm",
             t and t.center_m,
             "center_m",
+            error_scale=1000.0,
+            error_unit="mm",
         )
     )
     head = (
@@ -121,9 +131,7 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
         ("validation", "validation.passed",
          f"{verdict} ({val.test}; frames {val.frames[0]} vs {val.frames[1]}; "
          f"distance {value_text(val.distance, 4)}, threshold {value_text(val.threshold, 4)})"),
-        ("fit", "fit.rms_residual_m",
-         f"rms {r.fit.rms_residual_m * 1000:.2f} mm; {r.fit.observations} observations, {r.fit.tracks} tracks, "
-         f"{r.fit.frames} frames, {r.fit.outliers} outliers"),
+        ("fit", "fit.rms_residual_m", html.escape(fit_text(r.fit, "mm"))),
         ("solver", "solver.path",
          f"{html.escape(r.solver.path)}; {r.solver.iterations} evaluations; {r.solver.attempts} attempt(s); "
          f"{r.solver.elapsed_s * 1000:.0f} ms"),
@@ -138,7 +146,11 @@ def _summary(r: MotionResult, truth: Motion | None) -> str:
 
 @dataclass
 class _Row:
-    """One summary line: estimate, its 1 sigma, and (with a truth) the true value and error."""
+    """One summary line: estimate, its 1 sigma, and (with a truth) the true value and error.
+
+    The error is ``errors[error_key]`` times ``error_scale``, shown in ``error_unit`` (the unit
+    of the sigma when the sigma shows one; none when the name carries it); without that
+    error, a dash titled with ``no_error``, the reason."""
 
     name: str
     field: str
@@ -146,13 +158,22 @@ class _Row:
     sigma: str
     true: Any
     error_key: str
+    error_scale: float = 1.0
+    error_unit: str = ""
+    no_error: str = ""
 
     def html(self, errors: dict[str, float] | None) -> str:
         value = value_text(self.value)
         cells = f"<th>{self.name}</th><td data-field='{self.field}'>{value}</td><td>{html.escape(self.sigma)}</td>"
         if errors is not None:
-            error = f"{errors[self.error_key]:.3g}" if self.error_key in errors else ""
-            cells += f"<td>{value_text(_plain(self.true))}</td><td>{error}</td>"
+            cells += f"<td>{value_text(_plain(self.true))}</td>"
+            if self.error_key in errors:
+                error = f"{errors[self.error_key] * self.error_scale:.3g}"
+                error += f" {self.error_unit}" if self.error_unit else ""
+                cells += f"<td data-field='error.{self.field}'>{html.escape(error)}</td>"
+            else:
+                title = html.escape(self.no_error or "no error against this truth", quote=True)
+                cells += f"<td data-field='error.{self.field}' title=\"{title}\">&ndash;</td>"
         return f"<tr>{cells}</tr>"
 
 

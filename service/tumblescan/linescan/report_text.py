@@ -1,13 +1,39 @@
-"""Plain-text comparison of an estimate with the simulation truth (CLI demo output)."""
+"""Plain text of a motion estimate shared by the CLI and the HTML report: the fit in words,
+and the comparison of an estimate with the simulation truth (CLI demo output)."""
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 
 from ..report.html import sigmas_text
 from ..target.motion import Motion
-from .result import MotionResult
+from .result import FitPublic, MotionResult
 from .truth import errors_against
+
+
+def fit_text(fit: FitPublic, unit: Literal["m", "mm"] = "m") -> str:
+    """The fit in words, lengths in ``unit`` (``"m"`` or ``"mm"``). Frames: the RMS
+    surfel-to-plane residual, the points used of the points given, the frames and the worst
+    frame; tracks: the RMS residual over the observations, tracks, frames and outliers."""
+    scale = {"m": 1.0, "mm": 1000.0}[unit]
+
+    def length(v: float) -> str:
+        return f"{v * scale:.3g} {unit}"
+
+    if fit.source == "frames":
+        worst = max(((v, i) for i, v in enumerate(fit.frame_rms_m or []) if v is not None), default=None)
+        tail = f", worst frame {worst[1]} ({length(worst[0])})" if worst else ""
+        used = "" if fit.points_used is None else f"{fit.points_used} of "
+        return (
+            f"rms {length(fit.rms_residual_m)} surfel-to-plane, {used}{fit.observations} points, "
+            f"{fit.frames} frames{tail}"
+        )
+    return (
+        f"rms {length(fit.rms_residual_m)} over {fit.observations} observations, {fit.tracks} tracks, "
+        f"{fit.frames} frames, {fit.outliers} outliers"
+    )
 
 
 def comparison_table(result: MotionResult, truth: Motion) -> str:

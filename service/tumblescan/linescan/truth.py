@@ -84,6 +84,9 @@ def load_truth(path: Path) -> Motion:
         if not ok:
             what = "a finite number" if size == 0 else f"a list of {size} finite numbers"
             raise MalformedInputError(f"'truth': motion.{key} must be {what}", field=f"truth.motion.{key}")
+        if key.endswith("_axis") and not np.linalg.norm(np.asarray(value, dtype=float)) > 0:
+            raise MalformedInputError(f"'truth': motion.{key} is the zero vector: an axis needs a direction",
+                                      field=f"truth.motion.{key}")  # fmt: skip
     try:
         return motion_from_json(motion)
     except ValueError as exc:  # e.g. a zero-length axis

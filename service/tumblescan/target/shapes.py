@@ -246,9 +246,13 @@ class MeshFileShape(BaseModel):
         if len(mesh.triangles) == 0:
             raise MalformedInputError(f"{self.path} has no triangles Open3D can read", field="mesh")
         verts = np.asarray(mesh.vertices)
+        if not np.isfinite(verts).all():
+            raise MalformedInputError(f"{self.path}: a vertex has a NaN or infinite coordinate", field="mesh")
         tri = np.asarray(mesh.triangles)
         a, b, c = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        if not area.sum() > 0:
+            raise MalformedInputError(f"{self.path}: every triangle has zero area (a degenerate mesh)", field="mesh")
         centroid = (area[:, None] * (a + b + c) / 3).sum(axis=0) / area.sum()
         scale = self.size_m / float(np.max(np.ptp(verts, axis=0)))
         mesh.vertices = o3d.utility.Vector3dVector((verts - centroid) * scale)

@@ -136,6 +136,22 @@ def test_frames_without_a_planar_patch_in_common_are_refused(simulated: tuple[Mo
         estimate_from_frames(frames, options)
 
 
+def test_a_scan_too_sparse_for_its_patches_is_refused_as_such() -> None:
+    # 128 x 128 rays at 90 m fall about a cell apart on the box: no cell holds a patch, and the
+    # refusal says so (not "one rigid target?" or "the declared noise?"). At 50 m it is dense enough.
+    from bench.linescan.truth import dense_data
+
+    from tumblescan.linescan.dense.estimate import _too_sparse
+
+    scene = Scene(scanner=Scanner(lines=128, pixels=128))
+    sim = simulate_frames(random_motion(np.random.default_rng(1), distance_m=90.0), scene, seed=1)
+    frames = assemble_frames(TimedCloud(sim.xyz_m, sim.t_s, {"frame": sim.frame, "line": sim.line}))
+    with pytest.raises(InputError, match=r"too sparse for this target at this range .* more lines and pixels"):
+        estimate_from_frames(frames)
+    near = simulate_frames(random_motion(np.random.default_rng(1), distance_m=50.0), scene, seed=1)
+    assert _too_sparse(dense_data(near, float(near.t_s.min()), scene.scanner.noise.range_sigma_m)) is None
+
+
 def test_rectified_cloud_matches_the_truth_within_a_centimetre(
     simulated: tuple[Motion, FrameCloud], estimated: MotionResult
 ) -> None:
@@ -291,6 +307,11 @@ def test_bad_frame_uploads_are_422_naming_the_field(http: httpx.Client, frames_p
         "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"frame_period_s": -1})}
     )
     assert r.status_code == 422 and "frame_period_s" in r.text
+    # A frame period beside the points' own frame indices would be ignored: refused instead.
+    r = http.post(
+        "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"frame_period_s": 1.0})}
+    )
+    assert r.status_code == 422 and "frame_period_s" in r.text and "'frame' property" in r.text, r.text
     # Dense-fit settings are checked at the boundary too, naming the nested field.
     r = http.post(
         "/v1/jobs/upload", files={"file": ("f.ply", body)}, data={"options": json.dumps({"dense": {"sources": 5}})}

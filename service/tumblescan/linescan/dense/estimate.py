@@ -26,14 +26,16 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from ..._typing import FloatArray, Progress
+from ..errors import NoSurfacesError
 from ..frames import Frames
 from ..options import FramesOptions
 from ..result import MotionResult, motion_fields, nearest_on_spin_axis, validation_fields
 from ..sensor import SensorNoise
 from ..validation import Similarity, validation_frame_count
 from .attempts import RegistrationPoints, Setup, Solve, best_attempt, poor_fit
-from .data import prepare
+from .data import DenseData, prepare
 from .degeneracy import degenerate_warnings, imprecision_warning
+from .faces import MIN_SURFEL_POINTS
 from .refine import DenseFit
 from .registration import VOXEL_FRACTION, extent_m, register_consecutive
 
@@ -46,6 +48,8 @@ SURFEL_FRACTION = 1 / 100
 # end-on (extent 9 m, cells of 9 cm): 52 % of the points in planar cells at the true motion,
 # most of a frame's face-on cells out; with cells of 12 cm, 78 %.
 SURFEL_MIN_RANGE_SIGMAS = 6.0
+# Fewer of the points than this in cells a surface patch can use: the scan is too sparse.
+SPARSE_SHARE = 0.5
 
 
 def estimate_from_frames(
@@ -100,7 +104,15 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
     global_pairs = register_consecutive(per_frame, voxel_m=voxel, seed=opts.seed)
     mid = _frame_taus(reg.tau_s, reg.frame, n_frames)
     setup = Setup(data, reg, mid, voxel, extent, opts, noise, progress)
-    best, warnings, attempts = best_attempt(setup, global_pairs, n2)
+    try:
+        best, warnings, attempts = best_attempt(setup, global_pairs, n2)
+    except NoSurfacesError as exc:
+        sparse = _too_sparse(data)
+        if sparse is None:
+            raise
+        raise NoSurfacesError(
+            f"no planar patch of one frame could be matched in another: {sparse}", field=exc.field
+        ) from None
     if data.spurious:
         warnings.append(
             f"{data.spurious} points ({100 * data.spurious / len(cloud):.1f} %) were left out of the fit as spurious "
@@ -130,6 +142,20 @@ def _estimate(frames: Frames, opts: FramesOptions, progress: Progress) -> Motion
         )
     progress("estimated", 1.0)
     return _result(frames, fit, main, check, n2, T, warnings, attempts, time.perf_counter() - started)
+
+
+def _too_sparse(data: DenseData) -> str | None:
+    """Why no surface matched, when the scan's sampling says it (most points in cells too sparse
+    for a surface patch: few lines and pixels for the target's size and range), or None."""
+    count = np.bincount(data.cell, minlength=len(data.cell_frame))
+    share = float(np.mean(count[data.cell] >= MIN_SURFEL_POINTS))
+    if share >= SPARSE_SHARE:
+        return None
+    return (
+        f"the scan is too sparse for this target at this range (only {100 * share:.0f} % of the points lie in "
+        f"cells {100 * data.surfel_m:.3g} cm across holding the {MIN_SURFEL_POINTS} a patch needs); scan with more "
+        "lines and pixels, or from a shorter range"
+    )
 
 
 def _never_backwards(progress: Progress) -> Progress:
