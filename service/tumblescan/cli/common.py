@@ -7,6 +7,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import wraps
+from pathlib import Path
 from typing import Any, TypeVar
 
 import typer
@@ -55,6 +56,20 @@ def input_errors(fn: F) -> F:
             raise fail(f"{where}: {exc.strerror or exc}" if where else str(exc)) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def check_output_files(**paths: Path | None) -> None:
+    """Output files (keyword: the option's name, ``report_html`` for ``--report-html``) checked
+    before any work: each one's directory exists and it is not a directory itself. A command
+    refused here has written nothing; one refused after its work may have written a first output."""
+    for name, path in paths.items():
+        if path is None:
+            continue
+        option = "--" + name.replace("_", "-")
+        if path.is_dir():
+            raise InputError(f"{option}: {path} is a directory; give a file name", field=name)
+        if not path.parent.is_dir():
+            raise InputError(f"{option}: the directory {path.parent} does not exist", field=name)
 
 
 def first_error(exc: Any) -> str:

@@ -14,7 +14,7 @@ import typer
 
 from ..errors import InputError
 from ..linescan.choices import ModelChoice, Objective, ShapeName, Strategy
-from .common import input_errors, json_stdout
+from .common import check_output_files, input_errors, json_stdout
 
 if TYPE_CHECKING:
     from ..linescan.pipeline import Outcome
@@ -124,16 +124,6 @@ def _output_directory(out: Path) -> None:
         raise InputError(f"--out: cannot make the directory {out} ({exc.strerror or exc})", field="out") from None
 
 
-def _output_file(path: Path | None, option: str) -> None:
-    """An output file's place checked before the work: its directory exists, it is no directory."""
-    if path is None:
-        return
-    if path.is_dir():
-        raise InputError(f"--{option}: {path} is a directory; give a file name", field=option)
-    if not path.parent.is_dir():
-        raise InputError(f"--{option}: the directory {path.parent} does not exist", field=option)
-
-
 @app.command()
 @input_errors
 def estimate(
@@ -169,8 +159,7 @@ def estimate(
     # Options that would do nothing, and outputs with nowhere to go, are refused before the work.
     if truth is not None and report is None:
         raise InputError("--truth goes with --report (the report shows the truth beside the estimate)", field="truth")
-    for path, option in ((report, "report"), (rectified, "rectified")):
-        _output_file(path, option)
+    check_output_files(report=report, rectified=rectified)
     form = input_form(input_file)
     common: dict[str, Any] = {"model": model, "reference_time_s": reference_time_s, "seed": seed}
     if form == "frames":
@@ -292,7 +281,7 @@ def rectify(
     from ..linescan.rectify import rectify as rectify_points
 
     _finite(reference_time_s=reference_time_s)
-    _output_file(out, "out")
+    check_output_files(out=out)
     result = load_result(motion)
     cloud = read_ply(cloud_file)
     t_first, t_last = (float(cloud.t_s.min()), float(cloud.t_s.max())) if len(cloud) else (0.0, 0.0)
