@@ -88,3 +88,12 @@ def test_options_that_are_not_a_json_object_are_one_line(tmp_path: Path, options
     f.write_text("{}")
     r = submit("--kind", "bearings", "--options", options, f"input={f}")
     assert r.exit_code == 2 and r.output.count("\n") == 1 and words in r.output, r.output
+
+
+def test_a_bare_zip_goes_to_the_kinds_archive_part(tmp_path: Path, to_service: None) -> None:
+    # Refused for its content, as the archive: it went to the part that takes zips, not to
+    # 'meta' (the kind's first part), which would have been refused for want of frames.
+    f = tmp_path / "sequence.zip"
+    f.write_bytes(b"not really a zip")
+    r = submit("--kind", "spin-from-images", str(f))
+    assert r.exit_code == 2 and "archive" in r.output and "needs 'frames'" not in r.output, r.output

@@ -237,7 +237,8 @@ def submit(
             spec = client.kinds.get(kind)
             if out is not None and "cloud" not in {a.name for a in spec.artifacts}:
                 raise fail(f"--out writes the rectified cloud, and {kind} has none; use --artifacts DIR")
-            parts = _parts(files, spec.upload_parts(), {"cloud": cloud, "truth": truth})
+            formats = {p.name: p.formats for f in spec.forms for p in f.parts}
+            parts = _parts(files, formats, {"cloud": cloud, "truth": truth})
             job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
@@ -292,12 +293,14 @@ def _client(url: str | None, api_key: str | None) -> Any:
         raise fail(str(exc)) from None
 
 
-def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> dict[str, list[Path]]:
-    """Files by upload part: ``PART=FILE`` names its part, a bare file goes to the first part."""
+def _parts(args: list[str], formats: dict[str, list[str]], named: dict[str, Path | None]) -> dict[str, list[Path]]:
+    """Files by upload part (``formats``: each part's file formats, in the kind's order):
+    ``PART=FILE`` names its part; a bare file goes to the first part that takes its format (a
+    zip to the archive part), else to the first part."""
     parts: dict[str, list[Path]] = {}
     for arg in args:
         name, sep, rest = arg.partition("=")
-        part, path = (name, Path(rest)) if sep and name in known else (known[0], Path(arg))
+        part, path = (name, Path(rest)) if sep and name in formats else (_part_for(Path(arg), formats), Path(arg))
         parts.setdefault(part, []).append(path)
     for name, given in named.items():
         if given is not None:
@@ -309,6 +312,11 @@ def _parts(args: list[str], known: list[str], named: dict[str, Path | None]) -> 
             if not path.is_file():
                 raise fail(f"no such file: {path}")
     return parts
+
+
+def _part_for(path: Path, formats: dict[str, list[str]]) -> str:
+    suffix = path.suffix.lower().lstrip(".")
+    return next((name for name, taken in formats.items() if suffix in taken), next(iter(formats)))
 
 
 def _artifact_file(artifact: Any) -> str:
