@@ -147,3 +147,19 @@ def test_track_fits_beat_the_single_frame_bound_with_honest_covariance(scene: st
     assert len(ratios) >= 20
     assert np.sqrt(np.mean(np.square(ratios))) <= 1.3 / np.sqrt(10)  # the digest's tier-2 goal
     assert 0.6 <= np.mean(nees) <= 1.5
+
+
+@pytest.mark.parametrize(("method", "link"), [("ml", True), ("paper", True), ("ml", False), ("paper", False)])
+def test_the_summary_counts_the_tracks_listed_and_the_short_ones_apart(method: str, link: bool) -> None:
+    sim = simulate(SimulationConfig(scene="paper", seed=0))
+    result = estimate(parse_input(sim.input), EstimateOptions(method=method, link_tracks=link))
+    s = result["summary"]
+    ids = {t.get("track") for fr in result["frames"] for t in fr["targets"]} - {None}
+    assert s["tracks"] == len(result["tracks"])
+    assert s["short_tracks"] == len(ids) - len(result["tracks"])
+    assert {tr["id"] for tr in result["tracks"]} <= ids
+    if link:
+        assert s["short_tracks"] > 0  # K3 of the review: targets carry it, tracks[] does not list it
+    else:
+        assert not ids and s["tracks"] == s["short_tracks"] == 0
+    BearingsResult.model_validate(result)

@@ -108,3 +108,39 @@ def test_cli_submit_uploads_a_bearings_input_and_waits(url: str, tmp_path: Path)
     assert proc.returncode == 0, proc.stderr
     result = ClientResult.model_validate_json(proc.stdout)
     assert result.status == "succeeded" and len(result.frames) == 4
+
+
+@pytest.mark.parametrize(
+    ("options", "field", "message"),
+    [
+        ('{"method": "paper", "gate_chi2": 0.1}', "gate_chi2", "does not apply to method 'paper'"),
+        ('{"method": "paper", "multi_frame": false}', "multi_frame", "does not apply to method 'paper'"),
+        ('{"paper_gate_sigma": 3}', "paper_gate_sigma", "does not apply to method 'ml'"),
+        ('{"method": "ml", "paper_radius_deg": 5}', "paper_radius_deg", "does not apply to method 'ml'"),
+        ('{"link_tracks": false, "max_speed_m_s": 300}', "max_speed_m_s", "link_tracks is false"),
+        ('{"max_speed_m_s": Infinity}', "max_speed_m_s", "finite number"),
+        ('{"method": "paper", "paper_gate_sigma": Infinity}', "paper_gate_sigma", "finite number"),
+        ('{"gate_chi2": NaN}', "gate_chi2", "finite number"),
+    ],
+)
+def test_an_option_that_would_be_ignored_or_is_not_finite_is_a_422(
+    http: httpx.Client, options: str, field: str, message: str
+) -> None:
+    # Raw text: NaN and Infinity are JSON tokens a client's encoder may refuse to write.
+    body = '{"kind": "bearings", "input": ' + json.dumps(SIM.input) + ', "options": ' + options + "}"
+    r = http.post("/v1/jobs", content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["field"] == f"options.{field}" and message in detail["message"], detail
+    r = http.post("/v1/jobs/upload", data={"kind": "bearings", "options": options}, files=_upload())
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"]["field"] == f"options.{field}"
+
+
+def test_the_gate_below_the_clis_old_minimum_is_accepted(http: httpx.Client) -> None:
+    r = http.post("/v1/jobs", json={"kind": "bearings", "input": SIM.input, "options": {"gate_chi2": 0.05}})
+    assert r.status_code in (200, 201, 202), r.text
+
+
+def _upload() -> dict[str, tuple[str, bytes]]:
+    return {"input": ("scene.json", json.dumps(SIM.input).encode())}

@@ -48,7 +48,8 @@ class BearingsSummary(_Model):
     targets: int
     ambiguous: int
     unassociated: dict[str, int]
-    tracks: int = 0
+    tracks: int = 0  # fitted tracks, as many as ``tracks`` lists
+    short_tracks: int = 0  # linked track ids with too few fixes to fit (older services: 0)
     method: str = "ml"
 
 

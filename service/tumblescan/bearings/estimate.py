@@ -75,6 +75,11 @@ def estimate(
     progress("writing the result", 0.95)
     doc = _document(inp, fixes, track_ids if options.link_tracks else None, options, warnings)
     doc["tracks"] = tracks
+    # The summary counts what ``tracks[]`` lists (the fitted tracks); the track ids too short to
+    # fit (fewer than MIN_FIXES fixes), which targets still carry, are counted apart.
+    linked = len(np.unique(np.concatenate(track_ids))) if options.link_tracks and track_ids else 0
+    doc["summary"]["tracks"] = len(tracks)
+    doc["summary"]["short_tracks"] = linked - len(tracks)
     doc["timings_ms"] = {
         "associate": 1e3 * (t_assoc - start),
         "tracks": 1e3 * (t_link - t_assoc),
@@ -261,7 +266,6 @@ def _document(
         unassoc_total[s1] += len(unassoc[s1])
         unassoc_total[s2] += len(unassoc[s2])
         frames.append({"index": fr.index, "t": fr.t_s, "targets": targets, "unassociated": unassoc})
-    n_tracks = len(np.unique(np.concatenate(track_ids))) if track_ids and sum(map(len, track_ids)) else 0
     return {
         "schema": RESULT_SCHEMA,
         "status": "succeeded",
@@ -272,7 +276,8 @@ def _document(
             "targets": sum(len(fx) for fx in fixes),
             "ambiguous": n_amb,
             "unassociated": unassoc_total,
-            "tracks": n_tracks,
+            "tracks": 0,
+            "short_tracks": 0,
             "method": options.method,
         },
         "warnings": warnings,

@@ -4,6 +4,8 @@ input file to a result document (and an optional report)."""
 from __future__ import annotations
 
 import json
+import os
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +48,38 @@ def estimate_file(
     return inp, estimate(inp, options, progress)
 
 
-def write_report(path: Path, inp: BearingsInput, result: dict[str, Any], *, title: str) -> None:
-    from .report import build_report
+def write_outputs(
+    inp: BearingsInput, result: dict[str, Any], *, out: Path | None, report: Path | None, title: str
+) -> None:
+    """Write the result JSON to ``out`` and the report to ``report`` (either may be None), all
+    or nothing: both texts are made first, then written beside their targets and renamed into
+    place, so a report that fails (to render, or on a full disk) leaves no result behind it.
+    The directories must exist (the CLI checks them before the work); none is created. An
+    ``OSError`` names the target that failed (``filename``), not the temporary file."""
+    texts: list[tuple[Path, str]] = []
+    if out is not None:
+        texts.append((out, json.dumps(result, allow_nan=False)))
+    if report is not None:
+        from .report import build_report
 
-    path.write_text(build_report(inp, result, title=title), encoding="utf-8")
+        texts.append((report, build_report(inp, result, title=title)))
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, text in texts:
+            # Opened like any new file (mode "x", so the umask sets its permissions), under a
+            # name no other run picks (short, so a long target name still leaves room).
+            tmp = path.with_name(f".{path.name[:40]}.{uuid.uuid4().hex[:12]}.part")
+            try:
+                with tmp.open("x", encoding="utf-8") as f:
+                    staged.append((tmp, path))
+                    f.write(text)
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        for tmp, path in staged:
+            try:
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror, str(path)) from exc
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)

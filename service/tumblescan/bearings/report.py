@@ -40,7 +40,8 @@ def _summary(inp: BearingsInput, result: dict[str, Any]) -> str:
         ("frames", str(len(result["frames"]))),
         ("targets (all frames)", str(s["targets"])),
         ("ambiguous", str(s["ambiguous"])),
-        ("tracks", str(s.get("tracks", 0))),
+        ("tracks (fitted, listed below)", str(s.get("tracks", 0))),
+        ("tracks too short to fit (under 3 fixes)", str(s.get("short_tracks", 0))),
         ("unassociated detections", un),
         ("time", f"{result.get('timings_ms', {}).get('total', float('nan')):.0f} ms"),
     ]

@@ -50,7 +50,10 @@ class Summary(BaseModel):
     targets: int
     ambiguous: int
     unassociated: dict[str, int]
-    tracks: int = 0
+    tracks: int = Field(default=0, description="tracks fitted, the length of tracks[]")
+    short_tracks: int = Field(
+        default=0, description="track ids too short to fit (fewer than 3 fixes): on targets, not in tracks[]"
+    )
     method: str = "ml"
 
 

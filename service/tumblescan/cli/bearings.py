@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
-from .common import input_errors, json_stdout
+from .common import check_output_files, input_errors, json_stdout
 
 app = typer.Typer(
     add_completion=False,
@@ -54,7 +54,9 @@ def estimate(
     input_file: Annotated[Path, typer.Argument(help="tumblescan.bearings.input/1 JSON")],
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON on stdout")] = False,
     method: Annotated[str, typer.Option(help="ml (recommended) or paper (the paper's method, for comparison)")] = "ml",
-    gate_chi2: Annotated[float, typer.Option(min=0.1, max=1000.0, help="chi-square gate on a pair (1 dof)")] = 16.0,
+    gate_chi2: Annotated[
+        float | None, typer.Option(help="ml only: chi-square gate on a pair (1 dof); 16 when not given")
+    ] = None,
     tracks: Annotated[bool, typer.Option(help="link targets into tracks across frames")] = True,
     out: Annotated[Path | None, typer.Option(help="also write the result JSON here")] = None,
     report: Annotated[Path | None, typer.Option(help="write the HTML report here")] = None,
@@ -63,21 +65,15 @@ def estimate(
     import json
     import sys
 
-    from ..bearings.options import EstimateOptions
-    from ..bearings.pipeline import estimate_file, write_json, write_report
     from ..bearings.result import failure_document
+    from ..bearings.text import summary_text
     from ..errors import InputError
 
-    if method not in ("ml", "paper"):
-        raise typer.BadParameter(f"{method!r} is not 'ml' or 'paper'", param_hint="--method")
-    options = EstimateOptions(method=method, gate_chi2=gate_chi2, link_tracks=tracks)
+    # Every refusal, of an option as of the input, is an InputError here, so that with --json
+    # each one prints the failure document on stdout, as the contract says.
     try:
         with json_stdout(as_json):
-            inp, result = estimate_file(input_file, options)
-            if out is not None:
-                write_json(out, result)
-            if report is not None:
-                write_report(report, inp, result, title=f"Bearings: {input_file.name}")
+            result = _estimate(input_file, method, gate_chi2, tracks, out, report)
     except InputError as exc:
         if as_json:
             sys.stdout.write(json.dumps(failure_document(exc.code, str(exc), exc.field)) + "\n")
@@ -85,9 +81,49 @@ def estimate(
     if as_json:
         sys.stdout.write(json.dumps(result) + "\n")
         return
-    s = result["summary"]
-    typer.echo(
-        f"{s['targets']} targets in {len(result['frames'])} frames ({s['ambiguous']} ambiguous, {s['tracks']} tracks); "
-        f"unassociated detections: {', '.join(f'{k} {v}' for k, v in s['unassociated'].items())}; "
-        f"{result['timings_ms']['total']:.0f} ms"
-    )
+    typer.echo(summary_text(result))
+
+
+# The CLI's flag for each option it passes on, to name it in a refusal.
+FLAGS = {"method": "--method", "gate_chi2": "--gate-chi2", "link_tracks": "--tracks/--no-tracks"}
+
+
+def _estimate(
+    input_file: Path, method: str, gate_chi2: float | None, tracks: bool, out: Path | None, report: Path | None
+) -> dict[str, Any]:
+    """Check the options, the output paths and the input file before any work (so a refusal
+    has written nothing), then estimate and write the outputs all or nothing."""
+    from pydantic import ValidationError
+
+    from ..bearings.options import EstimateOptions
+    from ..bearings.pipeline import estimate_file, write_outputs
+    from ..errors import InputError, InvalidOptionError
+
+    # The options model is the one source of the bounds (NaN and Infinity included): a flag
+    # not given is left out, so it is neither checked against the method nor stored as given.
+    given: dict[str, Any] = {"method": method, "link_tracks": tracks}
+    if gate_chi2 is not None:
+        given["gate_chi2"] = gate_chi2
+    try:
+        options = EstimateOptions(**given)
+    except ValidationError as exc:
+        e = exc.errors(include_url=False)[0]
+        name = str(e["loc"][0]) if e["loc"] else "options"
+        raise InvalidOptionError(f"{FLAGS.get(name, name)}: {e['msg']}", field=name) from None
+    check_output_files(out=out, report=report)
+    if out is not None and report is not None and out.resolve() == report.resolve():
+        raise InputError(f"--report: {report} is also the --out file; give two names", field="report")
+    if input_file.is_dir():
+        raise InputError(f"{input_file} is a directory, not a file", field="input")
+    if not input_file.exists():
+        raise InputError(f"no such file: {input_file}", field="input")
+    try:
+        inp, result = estimate_file(input_file, options)
+    except OSError as exc:  # unreadable: permission denied, an I/O error
+        raise InputError(f"{input_file}: {exc.strerror or exc}", field="input") from None
+    try:
+        write_outputs(inp, result, out=out, report=report, title=f"Bearings: {input_file.name}")
+    except OSError as exc:  # a full disk, a directory denied: neither output is left half-way
+        name = "out" if out is not None and exc.filename == str(out) else "report"
+        raise InputError(f"--{name}: cannot write {exc.filename} ({exc.strerror or exc})", field=name) from None
+    return result
