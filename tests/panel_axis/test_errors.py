@@ -173,3 +173,85 @@ def test_absurdly_large_numbers_are_refused_naming_their_field(path: str, value:
     with pytest.raises(InputError) as exc:
         parse_meta(json.dumps(meta))
     assert exc.value.code == "invalid_input" and exc.value.field is not None and exc.value.field.startswith(path)
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "words"),
+    [
+        ("camera.fx_px", True, "not true"),  # was a focal length of 1 px: tilt 87.48 ± 0.015 deg, confidently wrong
+        ("camera.fx_px", "2400", 'not "2400"'),
+        ("camera.fy_px", False, "not false"),
+        ("camera.cx_px", "319.5", 'not "319.5"'),
+        ("camera.cy_px", True, "not true"),
+        ("camera.skew", "0", 'not "0"'),
+        ("camera.distortion.4", True, "not true"),
+        ("camera.width_px", True, "an integer is expected"),
+        ("camera.height_px", "480", 'not "480"'),
+        ("pointing.azimuth_deg", "288", 'not "288"'),
+        ("pointing.elevation_deg", True, "not true"),
+        ("pointing.roll_deg", "0", 'not "0"'),
+        ("station.lat_deg", "34.27", 'not "34.27"'),
+        ("station.lon_deg", True, "not true"),
+        ("station.height_m", "400", 'not "400"'),
+        ("prior.range_m", "70", 'not "70"'),
+        ("prior.panel_length_m", True, "not true"),
+        ("prior.panel_width_m", "2", 'not "2"'),
+        ("prior.wings", True, "an integer is expected"),
+    ],
+)
+def test_a_bool_or_a_string_is_not_a_number(path: str, value: object, words: str) -> None:
+    meta = _valid_meta()
+    block, key, *index = path.split(".")
+    if index:
+        meta[block][key] = [0.0] * 5  # type: ignore[index]
+        meta[block][key][int(index[0])] = value  # type: ignore[index]
+    else:
+        meta[block][key] = value  # type: ignore[index]
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta))
+    assert exc.value.code == "invalid_input" and exc.value.field == path, str(exc.value)
+    assert str(exc.value).startswith(f"{path}: ") and words in str(exc.value)
+
+
+def test_a_bool_in_the_rotation_is_not_a_number() -> None:
+    meta = _valid_meta()
+    meta["pointing"] = {"frame": "ecef", "R_cam_from_ref": [[1, 0, 0], [0, 1, 0], [0, 0, True]]}
+    with pytest.raises(InputError) as exc:
+        parse_meta(json.dumps(meta))
+    assert exc.value.field == "pointing.R_cam_from_ref.2.2" and "not true" in str(exc.value)
+
+
+def test_integers_written_as_whole_floats_and_plain_numbers_still_pass() -> None:
+    meta = _valid_meta()
+    meta["camera"].update(width_px=640.0, fx_px=1500, cx_px=319)  # type: ignore[attr-defined]
+    meta["prior"]["wings"] = 2.0  # type: ignore[index]
+    parsed = parse_meta(json.dumps(meta))
+    assert parsed.camera.width_px == 640 and parsed.camera.fx_px == 1500.0 and parsed.prior.wings == 2  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize("option", ["min_line_px", "weak_snr"])
+@pytest.mark.parametrize("value", [float("inf"), float("-inf"), float("nan")])
+def test_every_float_option_refuses_nan_and_infinity(option: str, value: float) -> None:
+    # {"weak_snr": Infinity} was accepted and forced every view to weak perspective; a NaN
+    # min_line_px was called out of range.
+    from pydantic import ValidationError
+
+    from tumblescan.panel_axis.options import EstimateOptions
+
+    with pytest.raises(ValidationError) as exc:
+        EstimateOptions.model_validate({option: value})
+    err = exc.value.errors()[0]
+    assert err["loc"] == (option,) and err["msg"] == "Input should be a finite number"
+
+
+def test_options_that_act_on_the_weak_perspective_test_are_refused_with_the_paper_method() -> None:
+    from pydantic import ValidationError
+
+    from tumblescan.panel_axis.options import EstimateOptions
+
+    assert EstimateOptions(method="paper", require_axis=False).method == "paper"
+    for extra in ({"require_axis": True}, {"weak_snr": 5.0}):
+        with pytest.raises(ValidationError) as exc:
+            EstimateOptions.model_validate({"method": "paper", **extra})
+        err = exc.value.errors()[0]
+        assert err["loc"] == (next(iter(extra)),) and "does not apply to method 'paper'" in err["msg"]

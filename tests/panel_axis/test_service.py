@@ -93,3 +93,30 @@ def test_a_blank_image_fails_the_job_with_no_target(http: httpx.Client, near_noi
     assert r.status_code in (200, 201, 202), r.text
     done = wait_job(http, r.json()["id"])
     assert done["status"] == "failed" and done["error"]["code"] == "no_target", done
+
+
+def test_a_bool_for_a_number_is_422_naming_the_field(http: httpx.Client, near_noisy: Path) -> None:
+    # "fx_px": true was a focal length of 1 px: 202, and the job succeeded with a wrong tilt.
+    meta = json.loads((near_noisy / "meta.json").read_text())
+    meta["camera"]["fx_px"] = True
+    r = http.post("/v1/jobs/upload", data={"kind": "panel-axis"}, files=_files(near_noisy, meta))
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["field"] == "camera.fx_px" and detail["code"] == "invalid_input" and "not true" in detail["message"]
+
+
+@pytest.mark.parametrize(
+    ("options", "field", "words"),
+    [
+        ('{"weak_snr": Infinity}', "options.weak_snr", "finite number"),
+        ('{"min_line_px": NaN}', "options.min_line_px", "finite number"),
+        ('{"method": "paper", "require_axis": true}', "options.require_axis", "does not apply to method 'paper'"),
+    ],
+)
+def test_bad_options_are_422_at_submission(
+    http: httpx.Client, near_noisy: Path, options: str, field: str, words: str
+) -> None:
+    r = http.post("/v1/jobs/upload", data={"kind": "panel-axis", "options": options}, files=_files(near_noisy))
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["field"] == field and words in detail["message"], detail

@@ -38,6 +38,11 @@ class Candidate(_Model):
     ecef: Vec | None = None
     cost: float
     sigma_deg: float | None = None
+    # The candidate's pitch and yaw in the station frame (older services: None).
+    pitch_deg: float | None = None
+    yaw_deg: float | None = None
+    sigma_pitch_deg: float | None = None
+    sigma_yaw_deg: float | None = None
 
 
 class Direction(_Model):

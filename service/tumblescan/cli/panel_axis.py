@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
-from .common import input_errors, json_stdout
+from ..errors import InputError
+from .common import check_output_files, input_errors, json_stdout
+
+if TYPE_CHECKING:
+    from ..panel_axis.options import EstimateOptions
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="panel-axis: a solar-panel axis from one optical image."
@@ -51,7 +55,9 @@ def estimate(
     meta: Annotated[Path, typer.Argument(help="meta.json (its 'image' is relative to it)")],
     image: Annotated[Path | None, typer.Option(help="the image, instead of meta.json's 'image'")] = None,
     method: Annotated[Literal["ours", "paper"], typer.Option(help="ours, or the paper's pipeline as written")] = "ours",
-    require_axis: Annotated[bool, typer.Option(help="refuse weak perspective without a prior")] = False,
+    require_axis: Annotated[
+        bool, typer.Option(help="refuse weak perspective without a prior (method ours: the paper's cannot tell it)")
+    ] = False,
     seed: Annotated[int, typer.Option(min=0)] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
     out: Annotated[Path | None, typer.Option(help="also write result.json here")] = None,
@@ -59,38 +65,52 @@ def estimate(
     truth: Annotated[Path | None, typer.Option(help="with --report: a simulation's truth.json")] = None,
 ) -> None:
     """Estimate the panel axis from meta.json and its image."""
-    from ..panel_axis.options import EstimateOptions
     from ..panel_axis.pipeline import load_input, run, write_result
+    from ..panel_axis.summary import summary_lines
 
+    # Everything that can be refused is refused before the work, so nothing is half-written:
+    # the options, where the outputs go, and the truth file.
+    options = _options(method=method, require_axis=require_axis, seed=seed)
+    if truth is not None and report is None:  # the truth is only ever drawn into the report
+        raise InputError("--truth goes with --report (the truth is shown in the HTML report only)", field="truth")
+    check_output_files(out=out, report=report)
+    if out is not None and report is not None and out.resolve() == report.resolve():
+        raise InputError(f"--out and --report are the same file ({out})", field="report")
     truth_doc = None
-    if truth is not None:  # read before the estimate, so a bad file is refused before any work
+    if truth is not None:
         from ..panel_axis.report import load_truth
 
         truth_doc = load_truth(truth.read_bytes())
     with json_stdout(as_json):  # OpenCV or Open3D chatter goes to stderr, not into the JSON
         data = load_input(meta, image)
-        result = run(data, EstimateOptions(method=method, require_axis=require_axis, seed=seed))
+        result = run(data, options)
         doc = result.to_json()
-        if out is not None:
-            write_result(out, result)
-        if report is not None:
+        page = None
+        if report is not None:  # built before either file is written: a failure here writes nothing
             from ..panel_axis.report import build_report
 
-            report.write_text(build_report(data.gray, data.meta, doc, truth_doc))
+            page = build_report(data.gray, data.meta, doc, truth_doc)
+        if out is not None:
+            write_result(out, result)
+        if report is not None and page is not None:  # (page is set whenever report is)
+            report.write_text(page)
     if as_json:
         typer.echo(json.dumps(doc))
         return
-    axis = result.axis
-    typer.echo(f"regime: {result.observability.regime} (perspective SNR {result.observability.perspective_snr})")
-    typer.echo(f"in-image angle: {result.image_angle_deg:.3f} deg")
-    if axis is None:
-        typer.echo("axis: not observable (weak perspective without a panel-size prior)")
-    else:
-        typer.echo(f"axis (camera): {[round(x, 6) for x in axis.camera]}, sigma {axis.sigma_deg} deg")
-        if axis.station_enu is not None:
-            typer.echo(f"axis (station ENU): {[round(x, 6) for x in axis.station_enu]}")
-            typer.echo(f"pitch {axis.pitch_deg:.3f} deg, yaw {axis.yaw_deg:.3f} deg")
-    if result.ambiguous:
-        typer.echo("ambiguous: the axis and its mirror twin fit equally well (weak perspective)")
-    for w in result.warnings:
-        typer.echo(f"warning: {w}")
+    for line in summary_lines(result):
+        typer.echo(line)
+
+
+def _options(**values: object) -> EstimateOptions:
+    """The estimator's options from the flags; a refusal names the flag (``--require-axis``), not
+    the field."""
+    from pydantic import ValidationError
+
+    from ..panel_axis.options import EstimateOptions
+
+    try:
+        return EstimateOptions.model_validate(values)
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        name = str(err["loc"][0]) if err["loc"] else "options"
+        raise InputError(f"--{name.replace('_', '-')}: {err['msg']}", field=name) from None

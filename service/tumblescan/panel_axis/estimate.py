@@ -301,16 +301,19 @@ def _weak_answer(
         return None, [], corners
     cands = []
     for k, pose in enumerate(poses[:2]):
-        dd = frames.direction(pose.axis_cam)
-        sig = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(pose.cov_tangent_rad2).max(), 0.0))))
+        a = frames.axis(pose.axis_cam, pose.cov_tangent_rad2, pose.basis)
         cands.append(
             Candidate(
                 kind="primary" if k == 0 else "mirror",
-                camera=dd.camera,
-                station_enu=dd.station_enu,
-                ecef=dd.ecef,
+                camera=a.camera,
+                station_enu=a.station_enu,
+                ecef=a.ecef,
                 cost=pose.cost_px,
-                sigma_deg=sig,
+                sigma_deg=a.sigma_deg,
+                pitch_deg=a.pitch_deg,
+                yaw_deg=a.yaw_deg,
+                sigma_pitch_deg=a.sigma_pitch_deg,
+                sigma_yaw_deg=a.sigma_yaw_deg,
             )
         )
     best = poses[0]

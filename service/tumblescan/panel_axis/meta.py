@@ -1,17 +1,21 @@
 """The input contract ``tumblescan.panel_axis.input/1``: meta.json, validated once at the door.
 
 Every refusal is an ``InputError`` (code ``invalid_input``) whose ``field`` names the field at
-fault, e.g. ``camera.fx_px`` or ``pointing.R_cam_from_ref``.
+fault, e.g. ``camera.fx_px`` or ``pointing.R_cam_from_ref``. Numbers are strict: a JSON number,
+never a bool or a string coerced to one (``"fx_px": true`` was a focal length of 1 px, and the job
+succeeded with a confident, wrong tilt); integers (image sizes, ``wings``) are JSON integers.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError
+from pydantic_core import PydanticCustomError
 
 from .._typing import FloatArray
 from ..errors import InputError
@@ -22,12 +26,28 @@ from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
 
 INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
-_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False)
+# strict: no bool or string is coerced to a number (every numeric field, nested lists included).
+_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+
+def _json_integer(value: Any) -> Any:
+    """An integer field takes a JSON number (640, or 640.0 as some writers put it), never a bool or
+    a string: strict mode would refuse 640.0 too, lax mode would take true as 1."""
+    if isinstance(value, bool | str):
+        raise PydanticCustomError(
+            "int_type", "an integer is expected (a JSON number), not {given}", {"given": json.dumps(value)}
+        )
+    return value
+
+
+JsonInt = Annotated[int, Strict(False), BeforeValidator(_json_integer)]
 
 
 class CameraMeta(SharedCameraMeta):
-    width_px: int = Field(ge=MIN_SIDE_PX)
-    height_px: int = Field(ge=MIN_SIDE_PX)
+    model_config = _STRICT  # the shared block coerces "2400" and true to numbers; this kind does not
+
+    width_px: JsonInt = Field(ge=MIN_SIDE_PX)
+    height_px: JsonInt = Field(ge=MIN_SIDE_PX)
 
 
 class AnglePointing(BaseModel):
@@ -60,7 +80,7 @@ class PriorMeta(BaseModel):
     range_m: float | None = Field(None, gt=0, le=1e9)  # beyond GEO (3.6e7 m) and the Moon (3.8e8 m)
     panel_length_m: float | None = Field(None, gt=0, le=1e3)
     panel_width_m: float | None = Field(None, gt=0, le=1e3)
-    wings: int = Field(2, ge=1, le=2)
+    wings: JsonInt = Field(2, ge=1, le=2)
 
 
 class PanelAxisInput(BaseModel):
@@ -107,7 +127,7 @@ def parse_meta(data: bytes | str, field: str = "meta") -> PanelAxisInput:
         err = exc.errors()[0]
         loc = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("AnglePointing", "MatrixPointing")))
         loc = loc.replace("schema_", "schema")
-        raise InputError(f"{loc}: {err['msg']}", field=loc) from None
+        raise InputError(f"{loc}: {_message(err)}", field=loc) from None
     _check(meta)
     return meta
 
@@ -124,7 +144,16 @@ def _pointing(p: dict[str, Any]) -> AnglePointing | MatrixPointing:
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = "pointing." + ".".join(str(x) for x in err["loc"])
-        raise InputError(f"{loc}: {err['msg']}", field=loc) from None
+        raise InputError(f"{loc}: {_message(err)}", field=loc) from None
+
+
+def _message(err: Any) -> str:
+    """pydantic's message, saying what was given when a number was expected and a bool or a string
+    came (strict mode's "Input should be a valid number" alone does not tell ``true`` from ``1.5``)."""
+    value = err.get("input")
+    if err["type"] == "float_type" and isinstance(value, bool | str):
+        return f"a number is expected (a JSON number), not {json.dumps(value)}"
+    return str(err["msg"])
 
 
 def _check(meta: PanelAxisInput) -> None:

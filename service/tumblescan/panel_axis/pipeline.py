@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .._typing import FloatArray, Progress, no_progress
+from ..errors import InputError
 from ..imaging.image_io import read_image, to_gray
 from .estimate import estimate_axis
 from .meta import PanelAxisInput, check_image_size, read_meta
@@ -28,14 +29,24 @@ class PanelAxisData:
 
 
 def load_input(meta_path: Path, image_path: Path | None = None) -> PanelAxisData:
-    """Validate meta.json and its image (``image_path``, else meta's ``image`` relative to meta.json)."""
+    """Validate meta.json and its image (``image_path``, else meta's ``image`` relative to meta.json).
+    A directory is named as one (the readers call anything that is not a file "no such file", which
+    sends the user looking for a typo in a path that exists)."""
+    _not_a_directory(meta_path, "meta")
     meta = read_meta(meta_path)
     path = image_path if image_path is not None else meta_path.parent / meta.image
+    _not_a_directory(path, "image")
     raw = read_image(path)
     gray = to_gray(raw)
     check_image_size(meta, gray)
     full_scale = float(np.iinfo(raw.dtype).max) if np.issubdtype(raw.dtype, np.integer) else 255.0
     return PanelAxisData(meta, gray, full_scale, path)
+
+
+def _not_a_directory(path: Path, field: str) -> None:
+    if path.is_dir():
+        hint = f" (did you mean {path / 'meta.json'}?)" if field == "meta" and (path / "meta.json").is_file() else ""
+        raise InputError(f"{field}: {path} is a directory, not a file{hint}", field=field)
 
 
 def run(

@@ -115,7 +115,10 @@ def build_report(
     obs = result["observability"]
     rows: list[list[str]] = [
         ["method", result.get("method", "ours"), ""],
-        ["regime", obs["regime"], f"perspective SNR {_f(obs.get('perspective_snr'), 3)}"],
+        # The paper's pipeline has no σ, hence no perspective SNR: its regime says nothing.
+        ["regime", "n/a (paper method)", "no sigma, so weak perspective is not detected"]
+        if result.get("method") == "paper"
+        else ["regime", obs["regime"], f"perspective SNR {_f(obs.get('perspective_snr'), 3)}"],
         [
             "ambiguous",
             str(result["ambiguous"]),

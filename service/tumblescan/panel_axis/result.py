@@ -36,12 +36,19 @@ class Axis(_Model):
 
 
 class Candidate(_Model):
+    """One of the weak-perspective pair, with its pitch/yaw and their σ like ``Axis`` (the twin is
+    as likely the panel's as the primary, so it gets the same numbers)."""
+
     kind: Literal["primary", "mirror"]
     camera: Vec
     station_enu: Vec | None = None
     ecef: Vec | None = None
     cost: float
     sigma_deg: float | None = None
+    pitch_deg: float | None = None
+    yaw_deg: float | None = None
+    sigma_pitch_deg: float | None = None
+    sigma_yaw_deg: float | None = None
 
 
 class Direction(_Model):
