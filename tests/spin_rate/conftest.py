@@ -6,6 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from tumblescan.spin_rate.options import EstimateOptions
+from tumblescan.spin_rate.pipeline import load_input, run
+from tumblescan.spin_rate.result import SpinResult
 from tumblescan.spin_rate.simulate import simulate_sequence, write_sequence
 
 WIDTH_PX = 256
@@ -40,3 +43,9 @@ def blank_seq(sims: Path) -> Path:
 @pytest.fixture(scope="session")
 def corrupt_seq(sims: Path) -> Path:
     return _write(sims, 3, "corrupt")
+
+
+@pytest.fixture(scope="session")
+def los_result(los_seq: Path) -> SpinResult:
+    """One estimate of ``los_seq`` with its tracks, for tests of what is made of a result."""
+    return run(load_input(los_seq / "meta.json"), EstimateOptions(return_tracks=True))

@@ -4,17 +4,21 @@ no_target, undersampled, too_few_features and not_converged from the estimate.""
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import BaseModel, ValidationError
 
 from tumblescan.errors import InputError
 from tumblescan.imaging.image_io import write_image
 from tumblescan.spin_rate import estimate as estimate_mod
 from tumblescan.spin_rate.errors import NoTargetError, NotConvergedError, TooFewFeaturesError, UndersampledError
+from tumblescan.spin_rate.meta import CameraMeta, FrameMeta, MetaOptions, PriorMeta, SpinInput, parse_meta
+from tumblescan.spin_rate.options import EstimateOptions
 from tumblescan.spin_rate.pipeline import load_input, run, unpack_zip
 from tumblescan.spin_rate.simulate import BROKEN_META, break_meta
 
@@ -141,3 +145,102 @@ def test_zip_path_tricks_and_bombs_are_refused(tmp_path: Path) -> None:
     with pytest.raises(InputError) as exc:
         unpack_zip(tmp_path / "junk.zip", tmp_path / "out3")
     assert exc.value.field == "archive"
+
+
+def _meta_text(src: Path, path: str, value: object) -> str:
+    """``src``'s meta.json with the field at dotted ``path`` (``frames.0.t_s``) set to ``value``."""
+    meta = json.loads((src / "meta.json").read_text())
+    *parents, last = path.split(".")
+    node = meta
+    for key in parents:
+        node = node[int(key)] if isinstance(node, list) else node[key]
+    node[int(last) if isinstance(node, list) else last] = value
+    return json.dumps(meta)
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "expected"),
+    [
+        ("camera.fx_px", True, "a JSON number"),  # was a focal length of 1 px: a wrong rate, no refusal
+        ("camera.fx_px", "2400", "a JSON number"),
+        ("frames.1.t_s", "1.7", "a JSON number"),
+        ("camera.width_px", 256.5, "a JSON integer"),
+        ("camera.distortion", [0.0, 0.0, 0.0, 0.0, False], "a JSON number"),
+        ("prior.max_rate_deg_s", "90", "a JSON number"),
+        ("options.return_tracks", "yes", "a JSON bool (true or false)"),
+        ("options.return_tracks", 1, "a JSON bool (true or false)"),
+        ("epoch_utc", 5, "a JSON string"),
+    ],
+)
+def test_a_value_of_the_wrong_json_type_is_refused_naming_the_field(
+    los_seq: Path, path: str, value: object, expected: str
+) -> None:
+    with pytest.raises(InputError) as exc:
+        parse_meta(_meta_text(los_seq, path, value))
+    assert exc.value.code == "invalid_input" and str(exc.value.field).startswith(path), str(exc.value)
+    shown = json.dumps(value[-1] if isinstance(value, list) else value)  # what came, as JSON
+    assert f"{expected} is expected, not the " in str(exc.value) and str(exc.value).endswith(shown)
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "says"),
+    [
+        ("camera.cx_px", 1e6, "outside the image"),  # was accepted: 2.09 ± 96 deg/s for 14.59
+        ("camera.cy_px", -3.0, "outside the image"),
+        ("exposure_s", 1e9, "longer than the shortest interval"),
+        ("epoch_utc", "yesterday", "ISO-8601"),
+        ("epoch_utc", "2024-05-01", "ISO-8601"),  # a date without a time
+        ("epoch_utc", "2024-05-01T12:00:00+02:00", "not in UTC"),
+    ],
+)
+def test_a_value_out_of_its_range_is_refused_naming_the_field(
+    los_seq: Path, path: str, value: object, says: str
+) -> None:
+    with pytest.raises(InputError) as exc:
+        parse_meta(_meta_text(los_seq, path, value))
+    assert exc.value.field == path and says in str(exc.value), str(exc.value)
+
+
+@pytest.mark.parametrize("epoch", ["2024-05-01T12:00:00Z", "2024-05-01T12:00:00.25+00:00", "2024-05-01 12:00:00", None])
+def test_a_utc_epoch_is_accepted(los_seq: Path, epoch: str | None) -> None:
+    assert parse_meta(_meta_text(los_seq, "epoch_utc", epoch)).epoch_utc == epoch
+
+
+def test_an_exposure_up_to_the_frame_interval_is_accepted(los_seq: Path) -> None:
+    meta = json.loads((los_seq / "meta.json").read_text())
+    gap = min(b["t_s"] - a["t_s"] for a, b in itertools.pairwise(meta["frames"]))
+    assert parse_meta(_meta_text(los_seq, "exposure_s", gap)).exposure_s == gap
+
+
+@pytest.mark.parametrize("model", [EstimateOptions, SpinInput, FrameMeta, CameraMeta, PriorMeta, MetaOptions])
+def test_every_input_and_option_model_refuses_nan_and_unknown_fields(model: type[BaseModel]) -> None:
+    # Any float field, now or later, must refuse NaN and Infinity ("finite number").
+    assert model.model_config.get("allow_inf_nan") is False and model.model_config.get("extra") == "forbid"
+
+
+@pytest.mark.parametrize("model", [SpinInput, FrameMeta, CameraMeta, PriorMeta, MetaOptions])
+def test_every_input_model_is_strict(model: type[BaseModel]) -> None:
+    # Lax models took true for 1 and "yes" for true, in fields not listed in the tests above too.
+    assert model.model_config.get("strict") is True
+
+
+@pytest.mark.parametrize(
+    ("options", "field"),
+    [({"return_tracks": "yes"}, "return_tracks"), ({"return_tracks": 1}, "return_tracks"), ({"method": 1}, "method")],
+)
+def test_options_of_the_wrong_json_type_are_refused(options: dict[str, object], field: str) -> None:
+    with pytest.raises(ValidationError) as exc:
+        EstimateOptions.model_validate(options)
+    assert exc.value.errors()[0]["loc"] == (field,)
+
+
+def test_a_frame_that_is_a_directory_says_so(los_seq: Path, tmp_path: Path) -> None:
+    # It said "is not in the input".
+    meta = json.loads((los_seq / "meta.json").read_text())
+    mp = _with_meta(los_seq, tmp_path, meta)
+    name = meta["frames"][2]["file"]
+    (tmp_path / name).unlink()
+    (tmp_path / name).mkdir()
+    with pytest.raises(InputError) as exc:
+        load_input(mp)
+    assert exc.value.field == "frames.2.file" and "is a directory" in str(exc.value)

@@ -70,3 +70,16 @@ def test_the_simulator_puts_the_axis_where_asked(geometry: str) -> None:
     t = [f["t_s"] for f in seq.meta["frames"]]
     assert all(b > a for a, b in itertools.pairwise(t))
     assert seq.truth["sigma_rate_crb_deg_s"] > 0
+
+
+def test_run_leaves_the_sequence_as_it_was(los_seq: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # run() set meta.json's return_tracks in place: a run for a report's tracks leaked them into
+    # whatever used the sequence next.
+    from tumblescan.spin_rate import pipeline
+
+    monkeypatch.setattr(pipeline, "estimate_spin", lambda seq, opts, progress: seq.meta.options.return_tracks)
+    seq = load_input(los_seq / "meta.json")
+    assert seq.meta.options.return_tracks is False
+    assert run(seq, EstimateOptions(return_tracks=True)) is True
+    assert seq.meta.options.return_tracks is False
+    assert run(seq) is False

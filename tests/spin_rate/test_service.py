@@ -91,3 +91,33 @@ def test_blank_frames_fail_the_job_with_no_target(http: httpx.Client, blank_seq:
     done = wait_job(http, r.json()["id"], timeout_s=60)
     assert done["status"] == "failed"
     assert done["error"]["code"] == "no_target"
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "field"),
+    [
+        ("camera.fx_px", True, "camera.fx_px"),  # was a 1 px focal length and a confident wrong rate
+        ("camera.cx_px", 1e6, "camera.cx_px"),  # was 202 and 2.09 ± 96 deg/s
+        ("exposure_s", 1e9, "exposure_s"),
+        ("epoch_utc", "yesterday", "epoch_utc"),
+    ],
+)
+def test_meta_of_the_wrong_type_or_out_of_range_is_422(
+    http: httpx.Client, los_seq: Path, path: str, value: object, field: str
+) -> None:
+    meta = json.loads((los_seq / "meta.json").read_text())
+    *parents, last = path.split(".")
+    node = meta
+    for key in parents:
+        node = node[key]
+    node[last] = value
+    r = http.post("/v1/jobs/upload", data={"kind": "spin-from-images"}, files=_files(los_seq, meta))
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"]["field"] == field
+
+
+def test_options_of_the_wrong_type_are_422(http: httpx.Client, los_seq: Path) -> None:
+    data = {"kind": "spin-from-images", "options": json.dumps({"return_tracks": "yes"})}
+    r = http.post("/v1/jobs/upload", data=data, files=_files(los_seq))
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"]["field"] == "options.return_tracks"

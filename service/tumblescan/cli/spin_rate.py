@@ -9,7 +9,8 @@ from typing import Annotated, Literal
 
 import typer
 
-from .common import input_errors, json_stdout
+from ..errors import InputError
+from .common import check_output_files, input_errors, json_stdout
 
 app = typer.Typer(
     add_completion=False,
@@ -39,9 +40,11 @@ def simulate(
     from ..spin_rate.simulate import BROKEN_META, simulate_sequence, write_sequence
 
     if bits not in (8, 16):
-        raise typer.BadParameter("--bits must be 8 or 16")
+        raise InputError(f"--bits must be 8 or 16, not {bits}", field="bits")
     if broken is not None and broken not in BROKEN_META:
-        raise typer.BadParameter(f"--broken must be one of {', '.join(BROKEN_META)}")
+        raise InputError(f"--broken must be one of {', '.join(BROKEN_META)}", field="broken")
+    if broken is not None and kind != "broken-meta":  # it once wrote a valid sequence, ignoring --broken
+        raise InputError(f"--broken goes with --kind broken-meta (not --kind {kind})", field="broken")
     seq = simulate_sequence(seed, kind, noises=(noise,), width_px=width_px, frames=frames, bits=bits, tiff=tiff,
                             drift=drift, broken=broken)  # fmt: skip
     meta = write_sequence(out, seq)
@@ -56,33 +59,37 @@ def estimate(
     as_json: Annotated[bool, typer.Option("--json", help="print only the result JSON")] = False,
     out: Annotated[Path | None, typer.Option(help="also write result.json here")] = None,
     report: Annotated[Path | None, typer.Option(help="write the HTML report here")] = None,
-    tracks: Annotated[bool, typer.Option(help="add per-track observations")] = False,
+    tracks: Annotated[
+        bool | None, typer.Option("--tracks/--no-tracks", help="add per-track observations (default: meta.json's)")
+    ] = None,
 ) -> None:
     """Estimate the spin rate (and axis, sense) from meta.json and its frames."""
     from ..spin_rate.options import EstimateOptions
     from ..spin_rate.pipeline import load_input, resolve_input, run, write_result
+    from ..spin_rate.text import summary_rows
 
+    # Before the work (3-40 s): an output that cannot be written is refused with nothing written.
+    check_output_files(out=out, report=report)
+    options = EstimateOptions(method=method, return_tracks=tracks)
     with tempfile.TemporaryDirectory() as tmp, json_stdout(as_json):
         meta = resolve_input(source, Path(tmp))
         seq = load_input(meta)
-        result = run(seq, EstimateOptions(method=method, return_tracks=tracks or (report is not None) or None))
+        wanted = seq.meta.options.return_tracks if tracks is None else tracks
+        # The report draws the tracked lines, so it needs the tracks; the result (stdout, --out)
+        # carries them only when asked, whether or not there is a report.
+        full = run(seq, options.model_copy(update={"return_tracks": True}) if report is not None else options)
+        result = full if wanted else full.model_copy(update={"tracks": None})
         doc = result.to_json()
-        if out is not None:
-            write_result(out, result)
         if report is not None:
             from ..spin_rate.report import build_report
 
-            report.write_text(build_report(seq, doc))
+            html = build_report(seq, full.to_json())  # built before anything is written
+        if out is not None:
+            write_result(out, result)
+        if report is not None:
+            report.write_text(html)
     if as_json:
         typer.echo(json.dumps(doc))
         return
-    s = result.spin
-    if not s.spinning:
-        typer.echo(f"not spinning (rate under {s.sigma_rate_deg_s} deg/s)")
-    else:
-        typer.echo(f"rate: {s.rate_deg_s:.4f} ± {s.sigma_rate_deg_s:.4f} deg/s (period {s.period_s} s)")
-        typer.echo(f"axis (camera): {s.axis_camera}, {s.axis_los_angle_deg} deg from the line of sight")
-        typer.echo(f"sense about the line of sight: {s.sense_about_los}")
-        if s.axis_ambiguous:
-            typer.echo(f"ambiguous: the mirror twin {s.axis_candidates[0].axis_camera} fits as well")
-    typer.echo(f"tracks {result.quality.line_tracks}, rms {result.quality.fit_rms_px} px, flags {result.quality.flags}")
+    for label, value in summary_rows(doc):
+        typer.echo(f"{label}: {value}")

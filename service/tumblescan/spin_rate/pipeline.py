@@ -3,6 +3,7 @@ result.json (shared by the CLI and the job)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import zipfile
 from pathlib import Path
@@ -13,7 +14,7 @@ from .._typing import Progress, no_progress
 from ..errors import InputError, LimitExceededError
 from ..imaging.image_io import read_image, to_gray
 from .estimate import Sequence, estimate_spin
-from .meta import MIN_SIDE_PX, SpinInput, read_meta
+from .meta import MIN_SIDE_PX, MetaOptions, SpinInput, read_meta
 from .options import EstimateOptions
 from .result import SpinResult
 
@@ -32,6 +33,8 @@ def load_input(meta_path: Path, frame_files: dict[str, Path] | None = None) -> S
     for i, fr in enumerate(meta.frames):
         field = f"frames.{i}.file"
         path = _frame_path(meta_path, fr.file, frame_files)
+        if path is not None and path.is_dir():  # it is in the input, as a directory: say so
+            raise InputError(f"{field}: {fr.file} is a directory, not an image file", field=field)
         if path is None or not path.is_file():
             raise InputError(f"{field}: {fr.file} is not in the input", field=field)
         raw = read_image(path, field=field)
@@ -127,10 +130,13 @@ def resolve_input(path: Path, workdir: Path) -> Path:
 
 
 def run(seq: Sequence, options: EstimateOptions | None = None, progress: Progress = no_progress) -> SpinResult:
-    """Estimate the spin of a loaded sequence."""
+    """Estimate the spin of a loaded sequence. ``options.return_tracks`` (when given) overrides
+    meta.json's for this run only: ``seq`` is left as it was (it was changed in place, so a run
+    for a report's tracks leaked them into whatever used ``seq`` next)."""
     opts = options or EstimateOptions()
-    if opts.return_tracks is not None:
-        seq.meta.options.return_tracks = opts.return_tracks
+    if opts.return_tracks is not None and opts.return_tracks != seq.meta.options.return_tracks:
+        meta = seq.meta.model_copy(update={"options": MetaOptions(return_tracks=opts.return_tracks)})
+        seq = dataclasses.replace(seq, meta=meta)
     return estimate_spin(seq, opts, progress)
 
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..report import figure_html, image_html, page, table_html
 from .estimate import Sequence
+from .text import summary_rows
 
 LINE_BGR = (60, 200, 60)
 AXIS_BGR = (40, 40, 230)
@@ -105,24 +106,9 @@ def angle_figure(seq: Sequence, result: dict[str, Any]) -> str:
 
 
 def build_report(seq: Sequence, result: dict[str, Any]) -> str:
-    s, q = result["spin"], result["quality"]
-    rows = [
-        ("spinning", s["spinning"]),
-        ("rate (deg/s)", f"{s['rate_deg_s']} ± {s['sigma_rate_deg_s']}"),
-        ("period (s)", f"{s['period_s']} ± {s['sigma_period_s']}"),
-        ("axis (camera)", s["axis_camera"]),
-        ("axis sigma (deg)", s["sigma_axis_deg"]),
-        ("axis from the line of sight (deg)", s["axis_los_angle_deg"]),
-        ("sense about the line of sight", s["sense_about_los"]),
-        ("mirror twin", next((c["axis_camera"] for c in s["axis_candidates"] if c["kind"] == "mirror"), None)),
-        ("rival rates (deg/s)", [c["rate_deg_s"] for c in s["axis_candidates"] if c["kind"] == "rate"] or None),
-        ("tracks / observations", f"{q['line_tracks']} / {q['observations']}"),
-        ("fit rms (px)", q["fit_rms_px"]),
-        ("revolutions covered", q["revolutions_covered"]),
-        ("flags", ", ".join(q["flags"]) or "none"),
-    ]
+    """The page: the numbers (as the CLI prints them), the frame strip, the axis and the fitted angle."""
     sections = [
-        "<h2>Spin</h2>" + table_html(["quantity", "value"], rows),
+        "<h2>Spin</h2>" + table_html(["quantity", "value"], summary_rows(result)),
         "<h2>Frames and tracked lines</h2>" + image_html(strip_png(seq, result), "tracked lines (green)"),
         "<h2>Spin axis on the first frame</h2>"
         + image_html(axis_png(seq, result), "axis red (arrow: spin vector), mirror twin orange"),
