@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -13,6 +15,7 @@ from tumblescan.marker_pose.estimate import estimate_poses
 from tumblescan.marker_pose.evaluate import evaluate
 from tumblescan.marker_pose.markers_io import markers_from_json
 from tumblescan.marker_pose.options import MarkerPoseOptions
+from tumblescan.marker_pose.result import MarkerPoseResult
 from tumblescan.marker_pose.simulate import SimConfig, simulate
 
 
@@ -38,6 +41,59 @@ def test_layout_is_bootstrapped_when_none_is_given() -> None:
     ev = evaluate(result, sim.truth())
     assert ev["ratio"] <= 1.3
     assert ev["coverage"] >= 0.98
+
+
+def _true_markers(result: MarkerPoseResult, truth: dict[str, Any]) -> dict[str, set[str | None]]:
+    """Each estimated marker's tracks' true markers (None: a glint or a reflection)."""
+    out: dict[str, set[str | None]] = {m.id: set() for m in result.layout.markers}
+    for track, marker in result.associations.items():
+        if marker is not None:
+            out[marker].add(truth["tracks"][track])
+    return out
+
+
+@pytest.mark.parametrize(
+    ("target", "motion", "seed", "frames"),
+    [("kite", "paper", 1, 100), ("kite", "paper", 6, 300), ("box", "tumble", 9, 100)],
+)
+def test_bootstrapped_layout_takes_no_glint_for_a_marker(target: str, motion: str, seed: int, frames: int) -> None:
+    # A glint sliding over a sphere at a few cm/s for half a second stays within the 3-sigma
+    # scatter and its mean a few cm from the sphere, beyond the duplicate gate: it became a fifth
+    # kite marker (3.9 cm from M1 on the first case). The box's was grown on the first round's
+    # three-marker poses, too noisy to show its slide, and must be dropped on a later round's.
+    sim = simulate(SimConfig(target=target, motion=motion, frames=frames, with_layout=False), seed)
+    truth = sim.truth()
+    result = estimate_poses(markers_from_json(sim.document()))
+    owners = _true_markers(result, truth)
+    assert all(None not in true or len(true) > 1 for true in owners.values()), owners  # none is a glint's alone
+    seen = {m for true in owners.values() for m in true if m is not None}
+    assert len(result.layout.markers) == len(seen)
+    assert evaluate(result, truth)["coverage"] >= 0.95
+
+
+def test_bootstrapped_marker_no_frame_identifies_is_dropped() -> None:
+    # A near duplicate grown on the last round took no observation in the final identification:
+    # it had no factor in the graph and GTSAM's marginals failed on it (a traceback, a 500).
+    sim = simulate(SimConfig(target="box", motion="paper", frames=300, with_layout=False), 12)
+    truth = sim.truth()
+    result = estimate_poses(markers_from_json(sim.document()))
+    owners = _true_markers(result, truth)
+    assert all(owners.values()), owners  # every marker of the layout is identified somewhere
+    assert all(m.sigma_m >= 0 and np.isfinite(m.sigma_m) for m in result.layout.markers)
+    assert evaluate(result, truth)["ratio"] <= 1.3
+
+
+def test_paper_coverage_counts_the_frames_it_could_not_chain() -> None:
+    # The paper's chain needs 4 identified markers: the coverage said 1.000 with 11 frames missing.
+    sim = simulate(SimConfig(target="kite", frames=100, with_layout=False), 1)
+    truth = sim.truth()
+    result = estimate_poses(markers_from_json(sim.document()), MarkerPoseOptions(method="paper"))
+    ours = estimate_poses(markers_from_json(sim.document()))
+    missing = sum(p.status == "missing" for p in result.poses) - sum(p.status == "missing" for p in ours.poses)
+    assert missing > 0
+    assert result.coverage < ours.coverage - 0.5 * missing / len(result.poses)
+    assert abs(result.coverage - evaluate(result, truth)["coverage"]) < 0.03  # the truth's count
+    assert any(f"{missing} frames identified" in w for w in result.warnings), result.warnings
 
 
 def test_constant_velocity_prior_smooths_below_the_per_frame_bound() -> None:
@@ -123,4 +179,4 @@ def test_layout_body_frame_without_a_layout_is_refused() -> None:
     sim = simulate(SimConfig(frames=60, with_layout=False), 0)
     with pytest.raises(InputError) as err:
         estimate_poses(markers_from_json(sim.document()), MarkerPoseOptions(body_frame="layout"))
-    assert err.value.code == "invalid_option" and err.value.field == "body_frame"
+    assert err.value.code == "invalid_option" and err.value.field == "options.body_frame"

@@ -106,6 +106,40 @@ def test_unknown_option_is_422(http: httpx.Client, sim_doc: tuple[dict[str, Any]
     assert r.status_code == 422 and "options.smoothing" in r.json()["detail"]["message"]
 
 
+@pytest.mark.parametrize(
+    ("options", "field"),
+    [
+        # Each once reached GTSAM and failed the job as internal_error ("indeterminate linear system").
+        ({"motion_prior": "constant_velocity", "accel_psd": float("inf")}, "options.accel_psd"),
+        ({"motion_prior": "constant_velocity", "angular_accel_psd": float("inf")}, "options.angular_accel_psd"),
+        ({"motion_prior": "constant_velocity", "accel_psd": 1e-300}, "options.accel_psd"),
+        ({"motion_prior": "constant_velocity", "angular_accel_psd": float("nan")}, "options.angular_accel_psd"),
+        # Named "point_sigma_m" (the reader's check) instead of the option's path.
+        ({"point_sigma_m": float("inf")}, "options.point_sigma_m"),
+        ({"outlier_sigma": float("nan")}, "options.outlier_sigma"),
+        # The paper's graph has no motion prior: it claimed one and bridged nothing.
+        ({"method": "paper", "motion_prior": "constant_velocity"}, "options.motion_prior"),
+        ({"accel_psd": 0.01}, "options.accel_psd"),  # tunes a prior not asked for
+    ],
+)
+def test_options_the_graph_cannot_use_are_422_at_submission(
+    http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]], options: dict[str, Any], field: str
+) -> None:
+    files = {"markers": ("m.json", json.dumps(sim_doc[0]).encode())}
+    # json.dumps writes Infinity and NaN as the review's curl did.
+    r = http.post("/v1/jobs/upload", data={"kind": KIND, "options": json.dumps(options)}, files=files)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail["field"] == field and detail["message"].startswith(field), detail
+
+
+def test_psd_bounds_run_as_a_job(http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]) -> None:
+    options = {"motion_prior": "constant_velocity", "angular_accel_psd": 1e-6, "accel_psd": 1e4}
+    job = http.post("/v1/jobs", json={"kind": KIND, "input": sim_doc[0], "options": options}).json()
+    done = wait_job(http, job["id"])
+    assert done["status"] == "succeeded", done
+
+
 @pytest.fixture(scope="module")
 def tag_sim() -> tuple[dict[str, Any], dict[str, Any]]:
     sim = simulate_tags(TagSimConfig(frames=60), 3)

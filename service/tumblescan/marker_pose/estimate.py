@@ -15,10 +15,10 @@ import numpy as np
 from .._typing import FloatArray, Progress, no_progress
 from .errors import InvalidOptionError
 from .geometry import launch_frame
-from .graph import GraphResult, auto_psd, frame_covariances, markers_graph, motion_graph, typical_sigma
+from .graph import STATUS_MEASURED, GraphResult, auto_psd, frame_covariances, markers_graph, motion_graph, typical_sigma
 from .identify import Association, associate
 from .labelling import Gates
-from .layout import bootstrap_layout
+from .layout import bootstrap_layout, drop_unseen
 from .markers_io import MarkerInput
 from .options import MarkerPoseOptions
 from .result import MarkerPoseResult
@@ -34,7 +34,9 @@ def estimate_poses(
     clock = time.perf_counter()
     body_frame = options.body_frame or ("layout" if data.layout is not None else "launch")
     if body_frame == "layout" and data.layout is None:
-        raise InvalidOptionError("body_frame 'layout' needs body.markers (no layout was given)", field="body_frame")
+        raise InvalidOptionError(
+            "body_frame 'layout' needs body.markers (no layout was given)", field="options.body_frame"
+        )
     sigma = options.point_sigma_m or data.point_sigma_m
     gates = Gates.make(sigma, options.outlier_sigma)
     warnings = list(data.warnings)
@@ -55,6 +57,9 @@ def estimate_poses(
     progress("identifying", 0.2)
     clock = time.perf_counter()
     assoc = associate(data, layout, gates)
+    if gauge is not None:
+        layout, assoc = drop_unseen(data, layout, assoc)
+        ids = ids[: len(layout)]
     warnings += assoc.warnings
     timing["identify_s"] = time.perf_counter() - clock
     # 3. The pose graph (the paper's chain instead, for benchmarks).
@@ -64,6 +69,12 @@ def estimate_poses(
         from .paper import paper_graph
 
         graph = paper_graph(data, assoc, layout, sigma, marginals=options.marginals)
+        unchained = int(np.sum(assoc.measured & (np.array(graph.status) != STATUS_MEASURED)))
+        if unchained:
+            warnings.append(
+                f"method 'paper': {unchained} frames identified with 3 or more markers have no pose (the paper's "
+                "chain needs 4 identified markers shared with the previous chained frame or the zero instant)"
+            )
     else:
         graph = _our_graph(data, assoc, layout, sigma, gauge, options)
     timing["graph_s"] = time.perf_counter() - clock

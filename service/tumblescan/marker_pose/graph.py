@@ -73,6 +73,38 @@ def _solve(graph: Any, values: Any) -> tuple[Any, int, float]:
     return result, int(opt.iterations()), 2.0 * float(graph.error(result))
 
 
+class _QRMarginals:
+    """``gtsam.Marginals`` by QR: the graph linearized at the solution and eliminated by
+    Householder QR on the whitened Jacobian (COLAMD order), then each variable's marginal from the
+    Bayes tree."""
+
+    def __init__(self, graph: Any, values: Any) -> None:
+        import gtsam
+
+        linear = graph.linearize(values)
+        self._tree = linear.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(linear), gtsam.EliminateQR)
+
+    def marginalCovariance(self, key: int) -> FloatArray:  # gtsam.Marginals' name and signature
+        return np.asarray(self._tree.marginalCovariance(key))
+
+
+def solve_marginals(graph: Any, values: Any) -> Any:
+    """The marginals of a solved graph: GTSAM's (Cholesky of the information matrix, the fast way),
+    or by QR where Cholesky finds the system indeterminate. A stiff motion prior (a small PSD at a
+    high frame rate) against precise poses, or a loose one against a stiff rotation, makes the
+    information matrix singular to working precision while its square root, which QR factors, is
+    still well conditioned (squaring doubles the condition number's exponent). LM solved it all the
+    same (its damping regularizes); only the marginals need this."""
+    import gtsam
+
+    try:
+        return gtsam.Marginals(graph, values)
+    except RuntimeError as exc:
+        if "Indeterminate" not in str(exc):
+            raise
+        return _QRMarginals(graph, values)
+
+
 def markers_graph(
     xyz_m: FloatArray,
     obs_frame: IntArray,
@@ -130,7 +162,7 @@ def markers_graph(
             graph.add(gtsam.PriorFactorPoint3(L(m), layout_m[m], gtsam.noiseModel.Diagonal.Sigmas(np.array(sig))))
     result, iterations, chi2 = _solve(graph, values)
     R, t, cov = no_poses(F)
-    marg = gtsam.Marginals(graph, result) if marginals else None
+    marg = solve_marginals(graph, result) if marginals else None
     for k in frames:
         T_wb = result.atPose3(X(int(k))).inverse()
         R[k], t[k] = T_wb.rotation().matrix(), T_wb.translation() - shift
@@ -251,7 +283,7 @@ def motion_graph(
         graph.add(gtsam.PriorFactorVector(V(int(nodes[0])), np.zeros(6), gtsam.noiseModel.Isotropic.Sigma(6, 1e3)))
     result, iterations, chi2 = _solve(graph, values)
     Rout, tout, cout = no_poses(F)
-    marg = gtsam.Marginals(graph, result) if marginals else None
+    marg = solve_marginals(graph, result) if marginals else None
     for node in nodes:
         k = int(node)
         T = result.atPose3(X(k))

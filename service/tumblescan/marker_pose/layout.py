@@ -5,6 +5,7 @@ layout jointly with every pose (bundle adjustment)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from itertools import combinations
 
 import numpy as np
@@ -12,7 +13,7 @@ import numpy as np
 from .._typing import FloatArray
 from .errors import TooFewFramesError
 from .geometry import launch_frame
-from .identify import UNASSIGNED, associate
+from .identify import UNASSIGNED, Association, associate
 from .labelling import Gates
 from .markers_io import MarkerInput
 
@@ -20,6 +21,7 @@ SEED_WINDOW = 15  # frames over which seed tracks must keep their distances
 MIN_FRAMES = 10  # a new marker is seen in this many measured frames first
 SPREAD_SIGMA = 3.0  # a new marker's body coordinates scatter at most this much (pose error included)
 MAX_ROUNDS = 6  # identify, refine and grow the layout at most this many times
+DRIFT_ALPHA = 1e-3  # false-alarm rate of the test that a new marker's track slides over the body
 
 
 def bootstrap_layout(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple[int, int, int]]:
@@ -27,15 +29,37 @@ def bootstrap_layout(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple
     layout, gauge = _seed(data, gates)
     for _ in range(MAX_ROUNDS):
         assoc = associate(data, layout, gates)
-        # Every marker from all frames it was identified in (the seed came from one frame), then
+        # Every marker from all frames it was identified in (the seed came from one frame), less
+        # the grown ones that turn out to slide over the body now that the poses are better, then
         # the tracks that are new markers.
         refined = _refine(data, assoc.R, assoc.t, assoc.obs_marker, layout)
-        grown = _grow(data, assoc.R, assoc.t, assoc.measured, assoc.obs_status, refined, gates)
+        keep = ~_sliding_markers(data, assoc.R, assoc.t, assoc.measured, assoc.obs_marker, len(layout), gates)
+        grown = _grow(data, assoc.R, assoc.t, assoc.measured, assoc.obs_status, refined[keep], gates)
         moved = float(np.max(np.linalg.norm(refined - layout, axis=1)))
         layout = grown
-        if len(grown) == len(refined) and moved < 0.1 * gates.sigma_m:
+        if keep.all() and len(grown) == len(refined) and moved < 0.1 * gates.sigma_m:
             break
+    else:  # the rounds ran out: the last round's new markers are checked for sliding all the same
+        assoc = associate(data, layout, gates)
+        layout = layout[~_sliding_markers(data, assoc.R, assoc.t, assoc.measured, assoc.obs_marker, len(layout), gates)]
     return layout, gauge
+
+
+def drop_unseen(data: MarkerInput, layout: FloatArray, assoc: Association) -> tuple[FloatArray, Association]:
+    """A bootstrapped layout without the grown markers no measured frame identified (a near
+    duplicate whose track its neighbour claims): such a marker has no factor in the graph, so no
+    estimate and no covariance (GTSAM has no variable to marginalize). The seed's three hold the
+    gauge and stay. The association is renumbered to match."""
+    use = (assoc.obs_marker >= 0) & assoc.measured[data.obs_frame]
+    seen = np.bincount(assoc.obs_marker[use], minlength=len(layout)) > 0
+    seen[:3] = True
+    if seen.all():
+        return layout, assoc
+    new_index = np.where(seen, np.cumsum(seen) - 1, -1)
+    obs_marker = np.where(assoc.obs_marker >= 0, new_index[np.maximum(assoc.obs_marker, 0)], -1)
+    gone = (assoc.obs_marker >= 0) & (obs_marker < 0)
+    obs_status = np.where(gone, UNASSIGNED, assoc.obs_status)
+    return layout[seen], replace(assoc, obs_marker=obs_marker, obs_status=obs_status)
 
 
 def _refine(data: MarkerInput, R: FloatArray, t: FloatArray, obs_marker: np.ndarray, layout: FloatArray) -> FloatArray:
@@ -124,7 +148,62 @@ def _grow(
         moved = float(np.max(np.linalg.norm(w - w.mean(axis=0), axis=1)))
         if spread > SPREAD_SIGMA * gates.sigma_m or moved < 10 * gates.sigma_m:
             continue
+        if _slides(b, data.t_s[k[sel]], gates.sigma_m):
+            continue
         if min(np.linalg.norm(np.array(new) - mean, axis=1)) < 2 * gates.gate_m:
             continue
         new.append(mean)
     return np.array(new)
+
+
+def _sliding_markers(
+    data: MarkerInput,
+    R: FloatArray,
+    t: FloatArray,
+    measured: np.ndarray,
+    obs_marker: np.ndarray,
+    M: int,
+    gates: Gates,
+) -> np.ndarray:
+    """(M,) bool: the grown markers (not the seed's three, which hold the gauge) most of whose
+    observations come from tracks that slide over the body. A glint can be grown on the first
+    round's poses (from the seed's three markers, noisy enough to hide its slide); a later round's
+    poses show it."""
+    use = (obs_marker >= 3) & measured[data.obs_frame]
+    idx = np.flatnonzero(use)
+    sliding = np.zeros(M)
+    if not len(idx):
+        return np.zeros(M, dtype=bool)
+    # Group the observations by (marker, track).
+    order = idx[np.lexsort((data.obs_track[idx], obs_marker[idx]))]
+    key = obs_marker[order].astype(np.int64) * (int(data.obs_track.max()) + 1) + data.obs_track[order]
+    bounds = np.flatnonzero(np.diff(key)) + 1
+    for group in np.split(order, bounds):
+        if len(group) < MIN_FRAMES:
+            continue
+        k = data.obs_frame[group]
+        body = np.einsum("nji,nj->ni", R[k], data.xyz_m[group] - t[k])
+        if _slides(body, data.t_s[k], gates.sigma_m):
+            sliding[obs_marker[group[0]]] += len(group)
+    return np.asarray(sliding > 0.5 * np.bincount(obs_marker[idx], minlength=M))
+
+
+def _slides(body: FloatArray, t_s: FloatArray, sigma_m: float) -> bool:
+    """Whether a track's body coordinates (n, 3) drift over its times (n,) [s]: the slope of their
+    straight-line fit is significant against the scatter about it (an F test at DRIFT_ALPHA).
+
+    A glint sliding over a sphere at a few cm/s stays within ``SPREAD_SIGMA`` of its mean for the
+    half second it lasts, and its mean lies a few cm from the sphere, beyond the duplicate gate: the
+    scatter alone would make it a marker. No marker moves on a rigid body, so a trend is the tell."""
+    n = len(t_s)
+    dt = t_s - t_s.mean()
+    sxx = float(dt @ dt)
+    if n < 4 or sxx <= 0.0:
+        return False
+    centred = body - body.mean(axis=0)
+    slope = dt @ centred / sxx  # (3,) [m/s]
+    scatter = float(np.sum((centred - np.outer(dt, slope)) ** 2)) / (3 * (n - 2))
+    scatter = max(scatter, (1e-3 * sigma_m) ** 2)  # noiseless input: a trend of rounding is none
+    from scipy.stats import f
+
+    return float(slope @ slope) * sxx / (3.0 * scatter) > float(f.isf(DRIFT_ALPHA, 3, 3 * (n - 2)))

@@ -203,7 +203,7 @@ def _check_units(units: Any) -> None:
 
 
 def _sigma(sensor: Any, override: float | None, warnings: list[str]) -> float:
-    field_name = "point_sigma_m" if override is not None else "sensor.point_sigma_m"
+    field_name = "options.point_sigma_m" if override is not None else "sensor.point_sigma_m"
     value: Any = override
     if value is None:
         if sensor is not None and not isinstance(sensor, dict):

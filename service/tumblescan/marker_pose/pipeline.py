@@ -20,14 +20,19 @@ from .tags_io import read_tags
 
 def input_level(path: Path) -> str:
     """'A' (markers JSON or CSV), 'B' (a tumblescan.tags.v1 JSON) or 'C' (a zip or a directory of
-    images with scene.json), from the first bytes (names are not trusted)."""
+    images with scene.json), from the first bytes (names are not trusted). Only a file named .zip
+    whose content is neither a zip nor a tags document is taken at its name's word: level C, whose
+    reader says it is not a readable zip (as the API's images part does), rather than level A's,
+    which would say it is neither markers JSON nor CSV."""
     if path.is_dir():
         return "C"
     with open(path, "rb") as fh:
         head = fh.read(4096)
     if head.startswith(b"PK\x03\x04"):
         return "C"
-    return "B" if TAGS_FORMAT.encode() in head else "A"
+    if TAGS_FORMAT.encode() in head:
+        return "B"
+    return "C" if path.suffix.lower() == ".zip" else "A"
 
 
 def run_tags(

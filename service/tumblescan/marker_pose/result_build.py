@@ -6,7 +6,7 @@ import numpy as np
 
 from .._typing import FloatArray, IntArray
 from .geometry import quat_wxyz, ypr_deg
-from .graph import GraphResult
+from .graph import STATUS_MEASURED, GraphResult
 from .identify import CONFLICT, REJECTED, Association
 from .markers_io import MarkerInput
 from .options import MarkerPoseOptions
@@ -65,6 +65,7 @@ def build_result(
     info.setdefault("landmarks", len(ids))
     info.setdefault("dof", 0)
     dense = np.bincount(data.obs_frame, minlength=F) >= 3
+    posed = np.array([status == STATUS_MEASURED for status in graph.status])
     frame_markers = ids[:3]
     return MarkerPoseResult(
         method=options.method,
@@ -88,7 +89,8 @@ def build_result(
             per_marker_rms_m=per_marker,
             rejected=rejected,
         ),
-        coverage=float(np.sum(assoc.measured & dense) / max(int(dense.sum()), 1)),
+        # Measured as the graph says: the paper's chain leaves out identified frames it cannot chain.
+        coverage=float(np.sum(posed & dense) / max(int(dense.sum()), 1)),
         warnings=warnings,
         timing_s=timing,
     )
