@@ -106,6 +106,16 @@ def test_unknown_option_is_422(http: httpx.Client, sim_doc: tuple[dict[str, Any]
     assert r.status_code == 422 and "options.smoothing" in r.json()["detail"]["message"]
 
 
+def test_a_layout_body_frame_without_a_layout_is_422_at_submission(
+    http: httpx.Client, sim_doc: tuple[dict[str, Any], dict[str, Any]]
+) -> None:
+    # It was accepted (202) and failed only when the job ran.
+    doc = {k: v for k, v in sim_doc[0].items() if k != "body"}
+    r = http.post("/v1/jobs", json={"kind": KIND, "input": doc, "options": {"body_frame": "layout"}})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"]["field"] == "options.body_frame" and "no layout" in r.json()["detail"]["message"]
+
+
 @pytest.mark.parametrize(
     ("options", "field"),
     [

@@ -25,6 +25,17 @@ from .result import MarkerPoseResult
 from .result_build import build_result
 
 
+def body_frame_of(data: MarkerInput, options: MarkerPoseOptions) -> str:
+    """The frame the poses are stated in: the option, else the layout's when one is given, else
+    the launch frame. ``layout`` without a layout is refused (at submission, by the job)."""
+    body_frame = options.body_frame or ("layout" if data.layout is not None else "launch")
+    if body_frame == "layout" and data.layout is None:
+        raise InvalidOptionError(
+            "body_frame 'layout' needs body.markers (no layout was given)", field="options.body_frame"
+        )
+    return body_frame
+
+
 def estimate_poses(
     data: MarkerInput, options: MarkerPoseOptions | None = None, progress: Progress = no_progress
 ) -> MarkerPoseResult:
@@ -32,11 +43,7 @@ def estimate_poses(
     options = options or MarkerPoseOptions()
     timing: dict[str, float] = {}
     clock = time.perf_counter()
-    body_frame = options.body_frame or ("layout" if data.layout is not None else "launch")
-    if body_frame == "layout" and data.layout is None:
-        raise InvalidOptionError(
-            "body_frame 'layout' needs body.markers (no layout was given)", field="options.body_frame"
-        )
+    body_frame = body_frame_of(data, options)
     sigma = options.point_sigma_m or data.point_sigma_m
     gates = Gates.make(sigma, options.outlier_sigma)
     warnings = list(data.warnings)

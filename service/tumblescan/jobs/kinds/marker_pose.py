@@ -5,11 +5,14 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from pydantic import BaseModel
 
 from ..kind import ArtifactSpec, FinishedJob, InputForm, InputPart, JobContext, JobOutput, Submission, form_named
+
+if TYPE_CHECKING:
+    from ...marker_pose.options import MarkerPoseLimits, MarkerPoseOptions
 
 MARKERS_FILE = "input-markers.json"
 TAGS_FILE = "input-tags.json"
@@ -107,6 +110,7 @@ class MarkerPoseGraph:
         return form_named(self, "tags" if "tags" in files else "markers")
 
     def accept(self, sub: Submission) -> dict[str, str]:
+        from ...marker_pose.estimate import body_frame_of
         from ...marker_pose.markers_io import markers_from_json
         from ...marker_pose.pipeline import load_input
 
@@ -119,12 +123,16 @@ class MarkerPoseGraph:
             archive = sub.files["images"][0]
             check_images(read_image_set(archive, sub.limits))  # type: ignore[arg-type]
             return {"images": str(archive.relative_to(sub.job_dir))}
+        # Level A: the markers read and validated, and the frame the poses would be stated in.
+        limits = cast("MarkerPoseLimits", sub.limits)
+        marker_options = cast("MarkerPoseOptions", options)
         if sub.payload is not None:
-            markers_from_json(sub.payload, point_sigma_m=getattr(options, "point_sigma_m", None), limits=sub.limits)  # type: ignore[arg-type]
+            data = markers_from_json(sub.payload, point_sigma_m=marker_options.point_sigma_m, limits=limits)
+            body_frame_of(data, marker_options)
             sub.save(MARKERS_FILE, json.dumps(sub.payload).encode())
             return {"markers": MARKERS_FILE}
         layout = sub.files.get("layout", [None])[0]
-        load_input(sub.files["markers"][0], layout, options, sub.limits)  # type: ignore[arg-type]
+        body_frame_of(load_input(sub.files["markers"][0], layout, marker_options, limits), marker_options)
         out = {"markers": str(sub.files["markers"][0].relative_to(sub.job_dir))}
         if layout is not None:
             out["layout"] = str(layout.relative_to(sub.job_dir))
