@@ -30,7 +30,7 @@ def test_usage_errors_are_one_line_and_exit_2(tmp_path: Path) -> None:
     f = tmp_path / "input.json"
     f.write_text("{}")
     cases = [
-        (["bearings", "estimate", str(f), "--method", "zzz"], "Invalid value for --method"),
+        (["bearings", "estimate", str(f), "--method", "zzz"], "--method: Input should be "),
         (["panel-axis", "estimate", str(f), "--seed", "-1"], "'--seed'"),
         (["kinds", "--zzz"], "No such option: --zzz"),
         (["no-such-command"], "No such command"),

@@ -3,6 +3,7 @@ submitted, in one line with exit code 2."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -97,3 +98,17 @@ def test_a_bare_zip_goes_to_the_kinds_archive_part(tmp_path: Path, to_service: N
     f.write_bytes(b"not really a zip")
     r = submit("--kind", "spin-from-images", str(f))
     assert r.exit_code == 2 and "archive" in r.output and "needs 'frames'" not in r.output, r.output
+
+
+def test_bare_tracks_json_goes_to_the_file_part_of_linescan(tmp_path: Path, to_service: None) -> None:
+    # The README's own command: linescan's 'file' takes tracks (JSON, CSV) in one form and frames
+    # (PLY, NPZ) in the other; a bare tracks.json once went to 'truth', the next part taking JSON.
+    from tumblescan import tracks_to_json
+
+    from ..conftest import tracks_for
+
+    f = tmp_path / "tracks.json"
+    f.write_text(json.dumps(tracks_to_json(tracks_for(1)[1])))
+    r = submit(str(f))
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.output)["status"] == "queued"

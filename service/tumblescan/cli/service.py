@@ -237,7 +237,11 @@ def submit(
             spec = client.kinds.get(kind)
             if out is not None and "cloud" not in {a.name for a in spec.artifacts}:
                 raise fail(f"--out writes the rectified cloud, and {kind} has none; use --artifacts DIR")
-            formats = {p.name: p.formats for f in spec.forms for p in f.parts}
+            # A part of several forms (linescan's 'file': tracks or frames) takes every form's formats.
+            formats: dict[str, list[str]] = {}
+            for form in spec.forms:
+                for part in form.parts:
+                    formats.setdefault(part.name, []).extend(part.formats)
             parts = _parts(files, formats, {"cloud": cloud, "truth": truth})
             job = client.jobs.upload(kind, files=parts, options=opts)
             if not wait:
