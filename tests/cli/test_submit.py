@@ -112,3 +112,50 @@ def test_bare_tracks_json_goes_to_the_file_part_of_linescan(tmp_path: Path, to_s
     r = submit(str(f))
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)["status"] == "queued"
+
+
+def test_an_unknown_part_is_named_as_such(tmp_path: Path, to_service: None) -> None:
+    f = tmp_path / "frames.ply"
+    f.write_text("ply")
+    # It said "no such file: bogus=...", as if the part's name were part of the path.
+    one_error_line(submit(f"bogus={f}"), "unknown part 'bogus'")
+
+
+def test_report_checks_its_output_before_the_download(tmp_path: Path) -> None:
+    # Port 9 has no service: refused before the client is used (it downloaded megabytes first).
+    report = ["report", "abc", "--url", "http://127.0.0.1:9", "--out"]
+    one_error_line(runner.invoke(app, [*report, str(tmp_path / "no" / "r.html")]), "no such directory")
+    one_error_line(runner.invoke(app, [*report, str(tmp_path)]), "is a directory")
+
+
+def test_a_bad_api_key_is_the_callers_mistake_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from fastapi.testclient import TestClient as Service
+
+    from tumblescan.api.app import create_app
+    from tumblescan.settings import Settings
+
+    settings = Settings(data_dir=tmp_path / "data", api_keys=["right"])
+    with Service(create_app(settings)) as service:
+        real, transport = tumblescan_client.Client, service._transport
+        monkeypatch.setattr(
+            tumblescan_client, "Client", lambda url=None, **kw: real("http://testserver", transport=transport, **kw)
+        )
+        f = tmp_path / "input.json"
+        f.write_text("{}")
+        r = runner.invoke(app, ["submit", "--kind", "bearings", str(f), "--api-key", "wrong"])
+    assert r.exit_code == 2, r.output
+    assert r.output.startswith("error: 401") and r.output.count("\n") == 1, r.output
+
+
+def test_a_wait_that_times_out_says_so_on_a_line_of_its_own(tmp_path: Path, to_service: None) -> None:
+    # No workers: the job stays queued, the bar is drawn, and the timeout's error follows it.
+    from tumblescan import tracks_to_json
+
+    from ..conftest import tracks_for
+
+    f = tmp_path / "tracks.json"
+    f.write_text(json.dumps(tracks_to_json(tracks_for(1)[1])))
+    r = submit(str(f), "--wait", "--timeout", "0.5")
+    assert r.exit_code != 0
+    last = r.output.rstrip("\n").split("\n")[-1]
+    assert last.startswith("error: ") and "[" not in last, r.output

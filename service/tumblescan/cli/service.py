@@ -76,7 +76,9 @@ def serve(
     redis_url: Annotated[str | None, typer.Option(help="TUMBLESCAN_REDIS_URL")] = None,
     database_url: Annotated[str | None, typer.Option(help="TUMBLESCAN_DATABASE_URL")] = None,
 ) -> None:
-    """Run the HTTP API with its worker pool (embedded SQLite queue and store by default)."""
+    """Run the HTTP API with its worker pool (embedded SQLite queue and store by default).
+
+    API keys come only from the environment: TUMBLESCAN_API_KEYS, TUMBLESCAN_ADMIN_KEYS."""
     import uvicorn
 
     from ..api.app import create_app
@@ -106,9 +108,9 @@ def serve(
 
 def worker(
     workers: Annotated[int | None, typer.Option(min=1, help="worker processes; default one per core")] = None,
-    data_dir: Annotated[Path | None, typer.Option()] = None,
-    redis_url: Annotated[str | None, typer.Option()] = None,
-    database_url: Annotated[str | None, typer.Option()] = None,
+    data_dir: Annotated[Path | None, typer.Option(help="TUMBLESCAN_DATA_DIR: artifacts (shared with the API)")] = None,
+    redis_url: Annotated[str | None, typer.Option(help="TUMBLESCAN_REDIS_URL: the queue (shared)")] = None,
+    database_url: Annotated[str | None, typer.Option(help="TUMBLESCAN_DATABASE_URL: the job store (shared)")] = None,
 ) -> None:
     """Run queue workers (scale-out: on any machine sharing the store, queue and artifacts)."""
     import multiprocessing
@@ -232,6 +234,7 @@ def submit(
         raise fail('--options must be a JSON object, {"name": value, ...}')
     _check_outputs(wait, timeout, out, artifacts)
     client = _client(url, api_key)
+    bar = ProgressBar()
     try:
         with client:
             spec = client.kinds.get(kind)
@@ -247,8 +250,8 @@ def submit(
             if not wait:
                 typer.echo(job.model_dump_json(indent=2))
                 return
-            job = client.jobs.wait(job.id, timeout=timeout, on_progress=ProgressBar())
-            typer.echo("", err=True)
+            job = client.jobs.wait(job.id, timeout=timeout, on_progress=bar)
+            bar.end()
             if job.status != "succeeded":
                 err = job.error
                 typer.echo(
@@ -267,9 +270,11 @@ def submit(
                     target = client.jobs.download_artifact(job.id, a.name, artifacts / _artifact_file(a))
                     typer.echo(f"wrote {target}", err=True)
     except TumblescanError as exc:
+        bar.end()
         raise typer.Exit(_client_error(exc)) from None
     except OSError as exc:  # a download target that cannot be written
-        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+        bar.end()
+        raise fail(f"cannot write {_target(exc)}: {exc.strerror or exc}") from None
 
 
 def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path | None) -> None:
@@ -304,6 +309,8 @@ def _parts(args: list[str], formats: dict[str, list[str]], named: dict[str, Path
     parts: dict[str, list[Path]] = {}
     for arg in args:
         name, sep, rest = arg.partition("=")
+        if sep and name not in formats and not Path(arg).exists():
+            raise fail(f"unknown part {name!r} in {arg!r}: this kind's parts are {', '.join(formats)}")
         part, path = (name, Path(rest)) if sep and name in formats else (_part_for(Path(arg), formats), Path(arg))
         parts.setdefault(part, []).append(path)
     for name, given in named.items():
@@ -330,10 +337,16 @@ def _artifact_file(artifact: Any) -> str:
     return artifact.name + ("" if "." in artifact.name else suffix or ".bin")
 
 
+def _target(exc: OSError) -> str:
+    """The file a failed download was for: downloads write ``<target>.part`` and rename it."""
+    name = str(exc.filename)
+    return name.removesuffix(".part")
+
+
 def _client_error(exc: Exception) -> int:
     """One line on stderr; exit 2 for what the caller got wrong, 1 for the service's trouble."""
     typer.echo(f"error: {exc}", err=True)
-    return 2 if getattr(exc, "status_code", 0) in (400, 404, 409, 413, 422) else 1
+    return 2 if getattr(exc, "status_code", 0) in (400, 401, 403, 404, 409, 413, 422) else 1
 
 
 def kinds(as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False) -> None:
@@ -363,12 +376,21 @@ class ProgressBar:
 
     def __init__(self, width: int = 30) -> None:
         self.width = width
+        self.drawn = False
 
     def __call__(self, job: Any) -> None:
         filled = round(job.progress * self.width)
         bar = "#" * filled + "-" * (self.width - filled)
         sys.stderr.write(f"\r[{bar}] {100 * job.progress:5.1f} %  {job.status:<9} {job.stage[:28]:<28}")
         sys.stderr.flush()
+        self.drawn = True
+
+    def end(self) -> None:
+        """End the bar's line, so that what follows (an error) starts a line of its own."""
+        if self.drawn:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            self.drawn = False
 
 
 def report(
@@ -380,6 +402,8 @@ def report(
     """Save a finished job's HTML report (self-contained, works offline)."""
     from tumblescan_client import TumblescanError
 
+    if out.is_dir() or not out.parent.is_dir():  # before the download, which may be megabytes
+        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
     client = _client(url, api_key)
     try:
         with client:
@@ -387,5 +411,5 @@ def report(
     except TumblescanError as exc:
         raise typer.Exit(_client_error(exc)) from None
     except OSError as exc:  # --out cannot be written
-        raise fail(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+        raise fail(f"cannot write {_target(exc)}: {exc.strerror or exc}") from None
     typer.echo(f"wrote {out}")
