@@ -21,7 +21,7 @@ from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
 from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
-from ..imaging.image_io import MAX_PIXELS, MIN_SIDE_PX
+from ..imaging.image_io import MIN_SIDE_PX
 from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
 
@@ -157,22 +157,7 @@ def _message(err: Any) -> str:
 
 
 def _check(meta: PanelAxisInput) -> None:
-    c = meta.camera
-    if c.width_px * c.height_px > MAX_PIXELS:
-        raise InputError(f"camera: {c.width_px}x{c.height_px} px is over the 64 Mpx limit", field="camera.width_px")
-    if not -0.5 <= c.cx_px <= c.width_px - 0.5:
-        raise InputError(
-            f"camera.cx_px: {c.cx_px} is outside the image [-0.5, {c.width_px - 0.5}]", field="camera.cx_px"
-        )
-    if not -0.5 <= c.cy_px <= c.height_px - 0.5:
-        raise InputError(
-            f"camera.cy_px: {c.cy_px} is outside the image [-0.5, {c.height_px - 0.5}]", field="camera.cy_px"
-        )
-    if c.distortion is not None and len(c.distortion) != 5:
-        raise InputError(
-            f"camera.distortion: {len(c.distortion)} coefficients (OpenCV [k1, k2, p1, p2, k3] expected)",
-            field="camera.distortion",
-        )
+    meta.camera.check()
     if isinstance(meta.pointing, MatrixPointing):
         R = np.asarray(meta.pointing.R_cam_from_ref, dtype=float)
         if R.shape != (3, 3):
