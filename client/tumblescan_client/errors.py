@@ -6,6 +6,8 @@ from typing import Any
 
 import httpx
 
+from ._retry import retry_after
+
 
 class TumblescanError(Exception):
     """Base of every error this client raises."""
@@ -34,25 +36,50 @@ class WaitTimeoutError(TumblescanError):
 
 class APIStatusError(TumblescanError):
     """The service answered with an error status; ``code``, ``message`` and ``field`` come
-    from its error body."""
+    from its error body. A body that is not the service's (a proxy's page, plain text) gives
+    an empty ``code`` and a one-line ``message``: the start of its text, or nothing for HTML.
+    ``retry_after`` is the seconds the answer's ``Retry-After`` asked for, or ``None``."""
 
     status_code: int = 0
 
     def __init__(self, response: httpx.Response) -> None:
         self.response = response
         self.status_code = response.status_code
+        self.retry_after = retry_after(response)
         detail: Any = None
         try:
-            detail = response.json().get("detail")
+            body = response.json()
         except ValueError:
-            detail = response.text
+            body = None
+        if isinstance(body, dict):
+            detail = body.get("detail")
         if isinstance(detail, dict):
             self.code = str(detail.get("code", ""))
             self.message = str(detail.get("message", ""))
             self.field = detail.get("field")
         else:
-            self.code, self.message, self.field = "", str(detail), None
-        super().__init__(f"{self.status_code} {self.code}: {self.message}".strip())
+            self.code, self.field = "", None
+            self.message = _one_line(detail if isinstance(detail, str) else _body_text(response))
+        head = f"{self.status_code} {self.code or response.reason_phrase}".strip()
+        super().__init__(f"{head}: {self.message}" if self.message else head)
+
+
+_SNIPPET_CHARS = 200
+
+
+def _body_text(response: httpx.Response) -> str:
+    """The body as text, or "" when it is HTML (a proxy's or server's error page)."""
+    text = response.text
+    start = text.lstrip()[:15].lower()
+    if "html" in response.headers.get("content-type", "").lower() or start.startswith(("<!doctype", "<html")):
+        return ""
+    return text[: _SNIPPET_CHARS * 8]
+
+
+def _one_line(text: str) -> str:
+    """``text`` on one line (whitespace and control characters collapsed), cut to about 200 characters."""
+    line = " ".join("".join(c if c.isprintable() else " " for c in text).split())
+    return line if len(line) <= _SNIPPET_CHARS else line[: _SNIPPET_CHARS - 3].rstrip() + "..."
 
 
 class BadRequestError(APIStatusError):
