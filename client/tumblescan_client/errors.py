@@ -102,6 +102,12 @@ class ConflictError(APIStatusError):
     status_code = 409
 
 
+class GoneError(APIStatusError):
+    """A finished job's file is no longer in the service's store (``artifact_missing``)."""
+
+    status_code = 410
+
+
 class PayloadTooLargeError(APIStatusError):
     status_code = 413
 
@@ -130,6 +136,7 @@ _BY_STATUS: dict[int, type[APIStatusError]] = {
         PermissionDeniedError,
         NotFoundError,
         ConflictError,
+        GoneError,
         PayloadTooLargeError,
         UnprocessableEntityError,
         RateLimitError,

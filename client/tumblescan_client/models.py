@@ -60,6 +60,7 @@ class Job(_Model):
     id: str
     kind: str
     status: Status
+    cancel_requested: bool = False  # a running job asked to stop (older services: False)
     progress: float
     stage: str
     created_at: datetime

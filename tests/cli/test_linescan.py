@@ -123,6 +123,9 @@ def test_a_file_named_ply_that_is_not_one_says_so(tmp_path: Path) -> None:
     proc = run("estimate", str(path))
     assert proc.returncode == 2
     assert proc.stderr == "error: scan.ply is named .ply but is not a PLY file (its first bytes say otherwise)\n"
+    path.write_bytes(b"")
+    proc = run("estimate", str(path))
+    assert proc.returncode == 2 and proc.stderr == "error: scan.ply is empty (0 bytes)\n"
 
 
 def test_strategy_lm_on_tracks_the_initializer_cannot_use_exits_2(sim: Path, tmp_path: Path) -> None:

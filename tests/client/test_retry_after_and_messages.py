@@ -185,3 +185,19 @@ def test_service_errors_and_other_json_read_as_before(use_async: bool) -> None:
     assert str(exc) == "404 Not Found: Not Found" and exc.code == ""
     exc = error_of(httpx.Response(502, json=["upstream", "down"]), use_async=use_async)
     assert str(exc) == '502 Bad Gateway: ["upstream","down"]'
+
+
+def test_a_missing_artifact_is_gone_and_a_cancel_request_shows() -> None:
+    from tumblescan_client import GoneError
+
+    gone = {"detail": {"code": "artifact_missing", "message": "job a's cloud (cloud.ply) is no longer in the store"}}
+    handle, _ = answers(httpx.Response(410, json=gone))
+    with (
+        Client("http://t", transport=httpx.MockTransport(handle), retry=POLICY) as client,
+        pytest.raises(GoneError) as exc,
+    ):
+        client.jobs.get("a")
+    assert exc.value.status_code == 410 and "no longer in the store" in str(exc.value)
+    handle, _ = answers(httpx.Response(200, json={**JOB, "status": "running", "cancel_requested": True}))
+    with Client("http://t", transport=httpx.MockTransport(handle), retry=POLICY) as client:
+        assert client.jobs.get("a").cancel_requested

@@ -94,6 +94,61 @@ def test_option_and_request_errors_carry_the_field(client: TestClient) -> None:
     assert detail(client.get("/v1/jobs", params={"limit": "x"}))["field"] == "query.limit"
 
 
+@pytest.mark.parametrize(
+    ("content", "words"),
+    [
+        (b'{"kind": "bearings", "input": ' + DEEP.encode() + b"}", "body: the JSON nests too deeply to read"),
+        (b'{"kind": "bearings", "input": {"n": ' + b"7" * 5000 + b"}}", "body: a number in the JSON is too long"),
+        (b'{"kind": "\xff"}', "body: not valid JSON"),
+        (b"\xff\xfe\x00", "body: not valid JSON"),
+    ],
+)
+def test_a_json_body_the_parser_cannot_read_is_a_422_naming_the_body(
+    client: TestClient, content: bytes, words: str
+) -> None:
+    # As the upload path says of its parts' JSON; FastAPI's own answer was 400 "There was an
+    # error parsing the body".
+    r = client.post("/v1/jobs", content=content, headers={"content-type": "application/json"})
+    d = detail(r)
+    assert d["code"] == "malformed_input" and d["field"] == "body" and words in d["message"], d
+
+
+def test_a_body_of_the_other_endpoints_type_names_the_type_each_takes(client: TestClient) -> None:
+    d = detail(client.post("/v1/jobs/upload", json={"kind": "bearings", "input": {}}))
+    assert d["code"] == "wrong_content_type" and d["field"] == "body"
+    assert "takes multipart/form-data, not application/json" in d["message"] and "POST /v1/jobs" in d["message"]
+    d = detail(client.post("/v1/jobs", content=b"kind=bearings", headers={"content-type": "text/plain"}))
+    assert d["code"] == "wrong_content_type" and d["field"] == "body"
+    assert "takes application/json, not text/plain" in d["message"] and "/v1/jobs/upload" in d["message"]
+    d = detail(client.post("/v1/jobs/upload", content=b"x"))
+    assert "not a body without a Content-Type" in d["message"]
+    # A form without a file is still the form's own problem.
+    d = detail(client.post("/v1/jobs/upload", data={"kind": "bearings"}))
+    assert d["field"] == "file" and "GET /v1/kinds/bearings lists its parts" in d["message"]
+
+
+@pytest.mark.parametrize(
+    ("kind", "part", "name"),
+    [
+        ("linescan-motion", "file", "frames.ply"),
+        ("linescan-motion", "file", "frames.npz"),
+        ("linescan-motion", "file", "tracks.csv"),
+        ("bearings", "input", "input.json"),
+    ],
+)
+def test_an_empty_file_is_said_to_be_empty(client: TestClient, kind: str, part: str, name: str) -> None:
+    # Not "is not a PLY file (its first bytes say otherwise)": an empty file has no first bytes.
+    d = detail(client.post("/v1/jobs/upload", data={"kind": kind}, files={part: (name, b"")}))
+    assert d["field"] == part and d["message"] == f"'{part}': {name} is empty (0 bytes)"
+
+
+@pytest.mark.parametrize("wait", ["nan", "inf", "-inf"])
+def test_a_wait_that_is_not_a_finite_number_says_so(client: TestClient, wait: str) -> None:
+    job = client.app.state.service.store.create(kind="bearings", options={}, input={}, owner=None)  # type: ignore[attr-defined]
+    d = detail(client.get(f"/v1/jobs/{job.id}", params={"wait": wait}))
+    assert d["field"] == "query.wait" and "finite number" in d["message"], d
+
+
 def _multipart(fields: list[tuple[str, str]], files: list[tuple[str, str, bytes]]) -> tuple[bytes, str]:
     """A multipart body by hand: httpx merges repeated text fields into one list, which is the
     very case under test."""

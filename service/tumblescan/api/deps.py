@@ -26,11 +26,13 @@ KEY_COOKIE = "tumblescan_key"
 
 
 def presented_key(request: Request) -> str:
-    """``Authorization: Bearer <key>``; for pages opened in a browser also the cookie or ``?api_key=``."""
+    """``Authorization: Bearer <key>``; for pages opened in a browser also ``?api_key=`` or the
+    cookie it leaves, in that order: a key given in the URL is the one meant (a stale cookie
+    neither hides it nor answers for it)."""
     scheme, _, key = request.headers.get("authorization", "").partition(" ")
     if scheme.lower() == "bearer" and key.strip():
         return key.strip()
-    return request.cookies.get(KEY_COOKIE) or request.query_params.get("api_key") or ""
+    return request.query_params.get("api_key") or request.cookies.get(KEY_COOKIE) or ""
 
 
 @dataclass(frozen=True)

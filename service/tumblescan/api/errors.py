@@ -12,12 +12,28 @@ from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from ..errors import InputError
+from ..errors import InputError, MalformedInputError
+from ..io.json_text import parse_json
 from ..jobs.artifacts import UploadTooLargeError
 from ..jobs.service import OptionsError, QueueUnavailableError
 
 RETRY_AFTER_S = "5"
+# FastAPI's answer when reading a JSON body raised something other than a JSONDecodeError
+# (nesting past the parser's limit, an integer past Python's digit limit, bytes that are not
+# UTF-8); the body is re-read here to say which.
+UNREADABLE_BODY = "There was an error parsing the body"
 log = logging.getLogger("tumblescan.api")
+
+
+class WrongContentTypeError(InputError):
+    """A body of another type than the endpoint takes (JSON to the upload, a form to the JSON)."""
+
+    code = "wrong_content_type"
+
+
+class ArtifactMissingError(Exception):
+    """A succeeded job's file is no longer in the artifact store (removed by hand, or lost):
+    410, the file is gone for good; nothing is being stored."""
 
 
 def error_response(status: int, code: str, message: str, **extra: Any) -> JSONResponse:
@@ -42,6 +58,25 @@ def describe(errors: list[dict[str, Any]], prefix: str = "") -> str:
     return "; ".join(parts)
 
 
+def is_json(content_type: str) -> bool:
+    media = content_type.partition(";")[0].strip().lower()
+    return media == "application/json" or (media.startswith("application/") and media.endswith("+json"))
+
+
+async def unreadable_body(request: Request) -> JSONResponse:
+    """The 422 for a JSON body the parser could not read, from the same parser (and words) as
+    an uploaded part's JSON: ``body: the JSON nests too deeply to read``. (FastAPI has read the
+    body already; ``request.body()`` returns it again.)"""
+    try:
+        parse_json(await request.body(), "body", error=MalformedInputError)
+        message = "body: the JSON could not be read"
+    except InputError as exc:
+        return error_response(422, exc.code, str(exc), field=exc.field)
+    except ValueError as exc:  # an integer past Python's digit limit (sys.int_max_str_digits)
+        message = f"body: a number in the JSON is too long to read ({str(exc).partition(';')[0]})"
+    return error_response(422, MalformedInputError.code, message, field="body")
+
+
 def install(app: FastAPI) -> None:
     @app.exception_handler(InputError)
     async def _input(_: Request, exc: InputError) -> JSONResponse:
@@ -58,9 +93,21 @@ def install(app: FastAPI) -> None:
         )
 
     @app.exception_handler(RequestValidationError)
-    async def _request(_: Request, exc: RequestValidationError) -> JSONResponse:
+    async def _request(request: Request, exc: RequestValidationError) -> JSONResponse:
         errs = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
+        ctype = request.headers.get("content-type", "")
+        if ctype and not is_json(ctype) and any(tuple(e.get("loc", ())) == ("body",) for e in errs):
+            # A JSON body sent as something else reaches validation as bytes ("a valid dictionary").
+            message = (
+                f"body: {request.method} {request.url.path} takes application/json, not {ctype.partition(';')[0]}"
+                "; files go to POST /v1/jobs/upload as multipart/form-data"
+            )
+            return error_response(422, WrongContentTypeError.code, message, field="body")
         return error_response(422, "invalid_request", describe(errs), field=first_field(errs), errors=errs)
+
+    @app.exception_handler(ArtifactMissingError)
+    async def _missing(_: Request, exc: ArtifactMissingError) -> JSONResponse:
+        return error_response(410, "artifact_missing", str(exc))
 
     @app.exception_handler(UploadTooLargeError)
     async def _too_large(_: Request, exc: UploadTooLargeError) -> JSONResponse:
@@ -80,7 +127,9 @@ def install(app: FastAPI) -> None:
         return error_response(503, "store_unavailable", "the job store is unavailable, retry later")
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if exc.detail == UNREADABLE_BODY and isinstance(exc.__cause__, RecursionError | ValueError):
+            return await unreadable_body(request)
         codes = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 409: "conflict"}
         code = codes.get(exc.status_code, "http_error")
         resp = error_response(exc.status_code, code, str(exc.detail))

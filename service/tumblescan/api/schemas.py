@@ -43,6 +43,10 @@ class JobPublic(BaseModel):
     id: str
     kind: str
     status: Status
+    cancel_requested: bool = Field(
+        description="a cancellation was asked for (DELETE); a running job stays 'running' until it stops, "
+        "within seconds, then is 'cancelled'"
+    )
     progress: float = Field(ge=0, le=1)
     stage: str
     created_at: datetime
@@ -69,6 +73,7 @@ class JobPublic(BaseModel):
             id=job.id,
             kind=job.kind,
             status=job.status,
+            cancel_requested=job.cancel_requested,
             progress=job.progress,
             stage=job.stage,
             created_at=datetime.fromtimestamp(job.created_at, UTC),

@@ -37,6 +37,8 @@ class Outcome:
 
 def input_form(path: Path, *, field: str = "file") -> InputForm:
     """'tracks' (JSON or CSV) or 'frames' (PLY or NPZ), from the file's first bytes."""
+    if path.is_file() and path.stat().st_size == 0:
+        raise MalformedInputError(f"{path.name} is empty (0 bytes)", field=field)
     kind = sniff(path)
     if kind in ("ply", "zip"):
         return "frames"

@@ -6,6 +6,7 @@ from fastapi import APIRouter, Response
 from fastapi.responses import JSONResponse, PlainTextResponse
 
 from ..deps import ServiceDep
+from ..errors import RETRY_AFTER_S
 
 router = APIRouter(tags=["health"])
 DURATION_BUCKETS_S = (0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 300.0, 600.0)
@@ -19,9 +20,10 @@ async def healthz() -> dict[str, str]:
     return {"status": "ok"}
 
 
-@router.get("/readyz", responses={503: {"description": "not ready"}})
+@router.get("/readyz", responses={503: {"description": "not ready (with Retry-After)"}})
 def readyz(service: ServiceDep) -> JSONResponse:
-    """Store and queue reachable and at least one worker process alive."""
+    """Store and queue reachable and at least one worker process alive; a 503 carries
+    ``Retry-After``, as every 503 does."""
     checks: dict[str, str] = {}
     try:
         service.store.ping()
@@ -44,9 +46,10 @@ def readyz(service: ServiceDep) -> JSONResponse:
         and checks["workers"] not in ("none",)
         and not checks["workers"].startswith("unknown")
     )
-    return JSONResponse(
-        {"status": "ready" if ready else "not ready", "checks": checks}, status_code=200 if ready else 503
-    )
+    body = {"status": "ready" if ready else "not ready", "checks": checks}
+    if ready:
+        return JSONResponse(body)
+    return JSONResponse(body, status_code=503, headers={"Retry-After": RETRY_AFTER_S})
 
 
 @router.get("/metrics", response_class=PlainTextResponse)

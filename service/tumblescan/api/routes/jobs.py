@@ -16,10 +16,12 @@ from starlette.datastructures import FormData
 from ...errors import MalformedInputError
 from ...io.json_text import parse_json
 from ...io.ply import read_ply
+from ...jobs.artifacts import safe_name
 from ...jobs.registry import get_kind
-from ...jobs.service import Upload
+from ...jobs.service import REPORT_FILE, JobService, Upload
 from ...jobs.tables import FINAL, Job
 from ..deps import CallerDep, ServiceDep
+from ..errors import ArtifactMissingError, WrongContentTypeError
 from ..schemas import (
     DEFAULT_KIND,
     REPORT_TEXT,
@@ -34,8 +36,15 @@ from ..schemas import (
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code in (400, 401, 404, 413, 422, 503, 507)}
+# A succeeded job's files: 409 before it has succeeded, 410 when a file has gone from the store.
+FILE_ERRORS: dict[int | str, dict[str, Any]] = {
+    **ERRORS,
+    409: {"model": ErrorBody, "description": "the job has not succeeded"},
+    410: {"model": ErrorBody, "description": "the file is no longer in the artifact store (artifact_missing)"},
+}
 # An image sequence may come as many files; the body limit still bounds the total size.
 MAX_FILES, MAX_FIELDS = 5000, 100
+FORM_TYPES = ("multipart/form-data", "application/x-www-form-urlencoded")
 
 
 def base_url(request: Request) -> str:
@@ -74,6 +83,13 @@ UPLOAD_BODY = upload_schema()
 async def upload_job(request: Request, response: Response, service: ServiceDep, caller: CallerDep) -> JobPublic:
     """Queue a job from uploaded files: ``kind``, ``options`` (JSON) and the kind's parts
     (``GET /v1/kinds/{name}`` lists them). Files are streamed to disk, never held in memory."""
+    media = request.headers.get("content-type", "").partition(";")[0].strip()
+    if media.lower() not in FORM_TYPES:  # JSON or else would be read as a form without a file
+        given = media or "a body without a Content-Type"
+        raise WrongContentTypeError(
+            f"body: POST /v1/jobs/upload takes multipart/form-data, not {given}; JSON input goes to POST /v1/jobs",
+            field="body",
+        )
     form = await request.form(max_files=MAX_FILES, max_fields=MAX_FIELDS)
     try:
         kind, options, files = _parse_upload(form)
@@ -103,9 +119,12 @@ def _parse_upload(form: FormData) -> tuple[str, dict[str, Any], dict[str, list[U
             continue
         if isinstance(value, str):
             raise MalformedInputError(f"'{field}' must be a file, not a text field", field=field)
+        if value.size == 0:  # said before a reader sniffs it and calls it some other format
+            name = safe_name(value.filename) or "the file"
+            raise MalformedInputError(f"'{field}': {name} is empty (0 bytes)", field=field)
         files.setdefault(field, []).append((value.filename, value.file))
     if not files:
-        raise MalformedInputError("the upload has no file; GET /v1/kinds/{kind} lists its parts", field="file")
+        raise MalformedInputError(f"the upload has no file; GET /v1/kinds/{kind} lists its parts", field="file")
     return kind, options, files
 
 
@@ -126,13 +145,16 @@ def list_jobs(
     return JobList(items=[public(j, request) for j in jobs], next_cursor=nxt)
 
 
+WAIT_TEXT = "long poll: hold up to this many seconds for a change (a finite number, 0 to 30)"
+
+
 @router.get("/{job_id}", responses=ERRORS)
 async def get_job(
     job_id: str,
     request: Request,
     service: ServiceDep,
     caller: CallerDep,
-    wait: Annotated[float, Query(ge=0, le=30, description="long poll: hold up to this many seconds for a change")] = 0,
+    wait: Annotated[float, Query(ge=0, le=30, allow_inf_nan=False, description=WAIT_TEXT)] = 0,
 ) -> JobPublic:
     """A job's status, progress, result and artifact links. With ``wait`` the answer comes as
     soon as the job's status, stage or progress changes, or when ``wait`` runs out."""
@@ -144,28 +166,29 @@ async def get_job(
     return public(job, request)
 
 
-@router.get("/{job_id}/artifacts", responses={**ERRORS, 409: {"model": ErrorBody}})
+@router.get("/{job_id}/artifacts", responses=FILE_ERRORS)
 def list_artifacts(job_id: str, request: Request, service: ServiceDep, caller: CallerDep) -> list[ArtifactPublic]:
-    """The files a succeeded job has: its kind's artifacts and its HTML report."""
+    """The files a succeeded job has: its kind's artifacts and its HTML report, each with the
+    file name its download is saved as."""
     job = _succeeded(service.get(job_id, caller.scope), job_id, "its artifacts exist")
     kind = get_kind(job.kind)
     specs = {a.name: a for a in kind.artifacts}
     base = f"{base_url(request)}/v1/jobs/{job_id}/artifacts"
     items = [
         ArtifactPublic(name=name, media_type=specs[name].media_type, description=specs[name].description,
-                       url=f"{base}/{name}", filename=name + Path(job.artifacts[name]).suffix)
+                       url=f"{base}/{name}", filename=_filename(name, job.artifacts[name]))
         for name in job.artifacts
         if name in specs
     ]  # fmt: skip
     report = ArtifactPublic(
-        name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report", filename="report.html"
+        name="report", media_type="text/html", description=REPORT_TEXT, url=f"{base}/report", filename=REPORT_FILE
     )
     return [*items, report]
 
 
 @router.get(
     "/{job_id}/artifacts/{name}",
-    responses={**ERRORS, 200: {"content": {"application/octet-stream": {}}}, 409: {"model": ErrorBody}},
+    responses={**FILE_ERRORS, 200: {"content": {"application/octet-stream": {}}}},
     response_class=FileResponse,
 )
 def get_artifact(
@@ -175,7 +198,8 @@ def get_artifact(
     caller: CallerDep,
     format: Annotated[Literal["ply", "npz"] | None, Query(description="PLY artifacts: ply (default) or npz")] = None,
 ) -> FileResponse:
-    """One artifact of a succeeded job (``report`` is its HTML report)."""
+    """One artifact of a succeeded job (``report`` is its HTML report), saved as the name
+    ``/artifacts`` lists (``cloud.ply``; ``cloud.npz`` with ``format=npz``)."""
     if name == "report":
         if format == "npz":
             raise MalformedInputError("format=npz applies to PLY artifacts; report is text/html", field="format")
@@ -184,59 +208,48 @@ def get_artifact(
     spec = next((a for a in get_kind(job.kind).artifacts if a.name == name), None)
     if spec is None or name not in job.artifacts:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no artifact {name!r}")
-    path = service.artifacts.path(job_id, job.artifacts[name])
-    if format == "npz" and path.suffix != ".ply":
+    if format == "npz" and Path(job.artifacts[name]).suffix != ".ply":
         raise MalformedInputError(f"format=npz applies to PLY artifacts; {name} is {spec.media_type}", field="format")
-    if format == "npz":
-        return _as_npz(path, f"{job_id}-{name}.npz")
-    return FileResponse(path, media_type=spec.media_type, filename=f"{job_id}-{path.name}")
+    return _download(service, job, name, spec.media_type, npz=format == "npz")
 
 
 @router.get(
     "/{job_id}/cloud",
-    responses={
-        **ERRORS,
-        200: {"content": {"application/octet-stream": {}}, "description": "binary PLY or NPZ"},
-        409: {"model": ErrorBody},
-    },
+    responses={**FILE_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "binary PLY or NPZ"}},
     response_class=FileResponse,
 )
 def get_job_cloud(
     job_id: str, service: ServiceDep, caller: CallerDep, format: Annotated[Literal["ply", "npz"], Query()] = "ply"
 ) -> FileResponse:
     """Alias of ``/artifacts/cloud``: the rectified cloud, binary PLY (default) or NPZ
-    (``xyz_m``, ``t_s`` and every other field)."""
+    (``xyz_m``, ``t_s`` and every other field), saved as ``cloud.ply`` (``cloud.npz``)."""
     job = _succeeded(service.get(job_id, caller.scope), job_id, "the cloud exists")
     if "cloud" not in job.artifacts:
         linescan = job.kind == DEFAULT_KIND
         why = "submit one with the tracks to get it rectified" if linescan else f"{job.kind} writes none"
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no cloud ({why})")
-    path = service.artifacts.path(job_id, job.artifacts["cloud"])
-    if format == "npz":
-        return _as_npz(path, f"{job_id}-rectified.npz")
-    return FileResponse(path, media_type="application/octet-stream", filename=f"{job_id}-rectified.ply")
+    return _download(service, job, "cloud", "application/octet-stream", npz=format == "npz")
 
 
 @router.get(
     "/{job_id}/report",
-    responses={
-        **ERRORS,
-        200: {"content": {"text/html": {}}, "description": "self-contained HTML"},
-        409: {"model": ErrorBody},
-    },
+    responses={**FILE_ERRORS, 200: {"content": {"text/html": {}}, "description": "self-contained HTML"}},
     response_class=FileResponse,
 )
 def get_job_report(job_id: str, service: ServiceDep, caller: CallerDep) -> FileResponse:
     """The job's report: one self-contained HTML file that works offline (alias of
-    ``/artifacts/report``)."""
+    ``/artifacts/report``), shown inline and saved as ``report.html``."""
     job = _succeeded(service.get(job_id, caller.scope), job_id, "its report exists")
-    return FileResponse(service.report_path(job), media_type="text/html")
+    path = report_path(service, job)
+    return FileResponse(path, media_type="text/html", filename=REPORT_FILE, content_disposition_type="inline")
 
 
 @router.delete("/{job_id}", responses=ERRORS)
 def cancel_job(job_id: str, request: Request, service: ServiceDep, caller: CallerDep) -> JobPublic:
-    """Cancel a queued or running job (a running one stops at its next check, within seconds);
-    its files are deleted once it has stopped. Finished jobs are returned unchanged."""
+    """Cancel a queued or running job: a queued one is ``cancelled`` at once; a running one
+    answers ``cancel_requested: true`` while still ``running`` and stops at its next check,
+    within seconds. Its files are deleted once it has stopped. Finished jobs are returned
+    unchanged."""
     return public(_found(service.cancel(job_id, caller.scope), job_id), request)
 
 
@@ -245,6 +258,44 @@ def _succeeded(job: Job | None, job_id: str, what: str) -> Job:
     if job.status != "succeeded" or job.artifacts_deleted:
         raise HTTPException(status.HTTP_409_CONFLICT, f"job {job_id} is {job.status}; {what} once it has succeeded")
     return job
+
+
+def _filename(name: str, stored: str) -> str:
+    """What artifact ``name`` is saved as, the listing's ``filename`` and the download's
+    Content-Disposition alike: the name with the stored file's extension (``cloud.ply``)."""
+    return name + Path(stored).suffix
+
+
+def _download(service: JobService, job: Job, name: str, media_type: str, *, npz: bool) -> FileResponse:
+    """Artifact ``name`` as stored, or a PLY one as NPZ; 410 when its file has gone."""
+    stored = job.artifacts[name]
+    path = service.artifacts.path(job.id, stored)
+    if not path.is_file():
+        gone = f"job {job.id}'s {name} ({_filename(name, stored)})"
+        raise ArtifactMissingError(f"{gone} is no longer in the artifact store; submit the job again to make it")
+    if npz:
+        return _as_npz(path, f"{name}.npz")
+    return FileResponse(path, media_type=media_type, filename=_filename(name, stored))
+
+
+def report_path(service: JobService, job: Job) -> Path:
+    """The succeeded job's report, built on first request; 410 naming the file it would be
+    built from when that has gone from the store (nothing is being stored: not a 507)."""
+    if not service.artifacts.path(job.id, REPORT_FILE).is_file():
+        for what, files in (("input", job.input), ("artifact", job.artifacts)):
+            for name, stored in files.items():
+                if not service.artifacts.path(job.id, stored).exists():
+                    raise ArtifactMissingError(
+                        f"job {job.id}'s report cannot be built: its {what} {name!r} ({Path(stored).name}) "
+                        "is no longer in the artifact store"
+                    )
+    try:
+        return service.report_path(job)
+    except FileNotFoundError as exc:  # gone while the report was being built
+        gone = Path(exc.filename).name if exc.filename else "a file it reads"
+        raise ArtifactMissingError(
+            f"job {job.id}'s report cannot be built: {gone} is no longer in the artifact store"
+        ) from None
 
 
 def _as_npz(path: Path, filename: str) -> FileResponse:

@@ -9,7 +9,9 @@ from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from ...jobs.tables import FINAL, Job
-from ..deps import KEY_COOKIE, ServiceDep, get_caller
+from ..deps import KEY_COOKIE, ServiceDep, get_caller, presented_key
+from ..errors import ArtifactMissingError
+from .jobs import report_path
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 PAGE_SIZE = 100
@@ -27,15 +29,15 @@ def page(title: str, body: str, *, status_code: int = 200, refresh_s: int | None
 
 
 def _owner(request: Request) -> str | HTMLResponse | None:
-    """The caller's job scope, or a 401 page."""
+    """The caller's job scope, or a 401 page saying whether the key is missing or not valid."""
     try:
         return get_caller(request).scope
     except HTTPException:
-        body = (
-            "<h1>API key required</h1><p>Open this page with <code>?api_key=&lt;your key&gt;</code> once; "
-            "the key is then kept in a cookie.</p>"
-        )
-        return page("API key required", body, status_code=401)
+        how = "Open this page with <code>?api_key=&lt;your key&gt;</code> once; the key is then kept in a cookie."
+        if presented_key(request):
+            body = f"<h1>Invalid API key</h1><p>The key given is not valid here. {how}</p>"
+            return page("Invalid API key", body, status_code=401)
+        return page("API key required", f"<h1>API key required</h1><p>{how}</p>", status_code=401)
 
 
 def _remember_key(request: Request, response: Response) -> Response:
@@ -88,7 +90,11 @@ def job_page(job_id: str, request: Request, service: ServiceDep) -> Response:
         body = f"<h1>Job not found</h1><p>No job <code>{html.escape(job_id)}</code> here. <a href='/'>All jobs</a></p>"
         return page("Job not found", body, status_code=404)
     if job.status == "succeeded" and not job.artifacts_deleted:
-        return _remember_key(request, FileResponse(service.report_path(job), media_type="text/html"))
+        try:
+            return _remember_key(request, FileResponse(report_path(service, job), media_type="text/html"))
+        except ArtifactMissingError as exc:
+            body = f"<h1>Report unavailable</h1><p>{html.escape(str(exc))}.</p><p><a href='/'>All jobs</a></p>"
+            return page("Report unavailable", body, status_code=410)
     error = (
         f"<p class='failed'>{html.escape(job.error_code or '')}: {html.escape(job.error_message or '')}</p>"
         if job.error_code
