@@ -17,6 +17,14 @@ PAPER_ONLY = ("paper_gate_sigma", "paper_radius_deg")
 LINKING = ("max_speed_m_s", "max_gap_frames")
 # Read only by the multi-frame association (ours).
 MULTI_FRAME = ("max_angular_rate_deg_s",)
+# What turns each on with method 'ml', and why it is refused when that is off.
+SWITCHED_BY = {
+    **{
+        name: ("multi_frame", "when multi_frame is false (it starts the multi-frame station tracks)")
+        for name in MULTI_FRAME
+    },
+    **{name: ("link_tracks", "when link_tracks is false with method 'ml' (no tracks are linked)") for name in LINKING},
+}
 
 
 def _not_applicable(why: str) -> PydanticCustomError:
@@ -78,16 +86,10 @@ class EstimateOptions(BaseModel):
             raise _not_applicable(f"to method '{info.data['method']}' (an option of method 'paper')")
         return value
 
-    @field_validator(*MULTI_FRAME)
+    @field_validator(*MULTI_FRAME, *LINKING)
     @classmethod
-    def _multi_frame_only(cls, value: Any, info: ValidationInfo) -> Any:
-        if info.data.get("method") == "ml" and info.data.get("multi_frame") is False:
-            raise _not_applicable("when multi_frame is false (it starts the multi-frame station tracks)")
-        return value
-
-    @field_validator(*LINKING)
-    @classmethod
-    def _linking_only(cls, value: Any, info: ValidationInfo) -> Any:
-        if info.data.get("method") == "ml" and info.data.get("link_tracks") is False:
-            raise _not_applicable("when link_tracks is false with method 'ml' (no tracks are linked)")
+    def _switched_on(cls, value: Any, info: ValidationInfo) -> Any:
+        switch, why = SWITCHED_BY[str(info.field_name)]
+        if info.data.get("method") == "ml" and info.data.get(switch) is False:
+            raise _not_applicable(why)
         return value
