@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import typer
 
-from . import bearings, demo, linescan, marker_pose, panel_axis, service, spin_rate
+from . import bearings, demo, linescan, marker_pose, panel_axis, remote, service, spin_rate
 from .common import OneLineErrors
 
 app = typer.Typer(
@@ -34,6 +34,7 @@ for _name, _group in KIND_GROUPS:
 for _command in (linescan.simulate, linescan.estimate, linescan.rectify):
     app.command(help=f"{_command.__doc__}\n\nAlias of 'tumblescan linescan-motion {_command.__name__}'.")(_command)
 service.register(app)
+remote.register(app)
 app.command()(demo.demo)
 
 

@@ -14,7 +14,7 @@ from typing import Annotated
 
 import typer
 
-from .service import ProgressBar
+from .remote import ProgressBar
 
 
 def demo(
