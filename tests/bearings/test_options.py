@@ -49,6 +49,14 @@ def test_each_methods_own_options_are_accepted() -> None:
     assert EstimateOptions(method="paper").model_dump(exclude_unset=True) == {"method": "paper"}
 
 
+@pytest.mark.parametrize("method", ["ml", "paper"])
+def test_every_option_sent_at_its_default_is_accepted(method: str) -> None:
+    # A client or form that sends every option: a default changes nothing, so nothing is ignored.
+    sent = {**EstimateOptions().model_dump(), "method": method, "link_tracks": False, "multi_frame": False}
+    sent = {k: v for k, v in sent.items() if not (method == "paper" and k == "multi_frame")}
+    assert EstimateOptions.model_validate(sent).method == method
+
+
 @pytest.mark.parametrize("name", LINKING)
 def test_linking_options_need_linking(name: str) -> None:
     e = refusal(link_tracks=False, **{name: VALUES[name]})

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from tumblescan import tracks_to_json
@@ -50,3 +51,16 @@ def test_an_option_value_the_options_model_refuses_is_one_line(tmp_path: Path) -
     r = runner.invoke(app, ["linescan-motion", "estimate", str(f), "--range-sigma-m", "-1"])
     assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
     assert "range_sigma_m" in r.output
+
+
+def test_two_outputs_naming_one_file_are_refused_before_the_work(tmp_path: Path) -> None:
+    from tumblescan.cli.common import check_output_files
+    from tumblescan.errors import InputError
+
+    f = tmp_path / "result.json"
+    with pytest.raises(InputError, match="--out and --report are the same file"):
+        check_output_files(out=f, report=tmp_path / "." / "result.json")
+    check_output_files(out=f, report=tmp_path / "report.html", rectified=None)
+    # spin-from-images wrote its result, then overwrote it with the report.
+    r = runner.invoke(app, ["spin-from-images", "estimate", str(tmp_path), "--out", str(f), "--report", str(f)])
+    assert r.exit_code == 2 and "the same file" in r.output and not f.exists(), r.output

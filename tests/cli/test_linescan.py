@@ -223,6 +223,14 @@ def test_estimate_refuses_options_that_would_do_nothing_before_the_work(sim: Pat
     one_line_refusal(run("estimate", frames, "--frame-period-s", "0.5"), "'frame' property")
     (tmp_path / "c.json").write_text("{}")
     one_line_refusal(run("estimate", tracks, "--cloud", str(tmp_path / "c.json")), "cloud c.json: not a PLY file")
+    # A truth the report could not show is refused before the work, and before any output.
+    doc = json.loads((sim / "truth.json").read_text())
+    doc["motion"]["spin_axis"] = [0, 0, 0]
+    (tmp_path / "truth.json").write_text(json.dumps(doc))
+    (tmp_path / "frames.ply").write_bytes((sim / "frames.ply").read_bytes())
+    args = ("estimate", str(tmp_path / "frames.ply"), "--report", str(tmp_path / "r.html"))
+    one_line_refusal(run(*args, "--truth", str(tmp_path / "truth.json")), "motion.spin_axis is the zero vector")
+    assert not (tmp_path / "frames-rectified.ply").exists()
 
 
 def test_rectify_refuses_a_reference_time_far_from_the_cloud(sim: Path, tmp_path: Path) -> None:

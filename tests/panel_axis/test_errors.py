@@ -250,6 +250,8 @@ def test_options_that_act_on_the_weak_perspective_test_are_refused_with_the_pape
     from tumblescan.panel_axis.options import EstimateOptions
 
     assert EstimateOptions(method="paper", require_axis=False).method == "paper"
+    # Every option at its default, as a client sending all of them would: nothing to ignore.
+    assert EstimateOptions.model_validate({**EstimateOptions().model_dump(), "method": "paper"}).method == "paper"
     for extra in ({"require_axis": True}, {"weak_snr": 5.0}):
         with pytest.raises(ValidationError) as exc:
             EstimateOptions.model_validate({"method": "paper", **extra})

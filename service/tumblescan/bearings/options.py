@@ -27,6 +27,11 @@ SWITCHED_BY = {
 }
 
 
+def _changed(model: type[BaseModel], value: Any, info: ValidationInfo) -> bool:
+    """Whether ``value`` differs from the field's default (only then can it be ignored)."""
+    return bool(value != model.model_fields[str(info.field_name)].default)
+
+
 def _not_applicable(why: str) -> PydanticCustomError:
     return PydanticCustomError("option_not_applicable", "does not apply {why}", {"why": why})
 
@@ -71,18 +76,19 @@ class EstimateOptions(BaseModel):
     paper_radius_deg: float = Field(default=10.0, gt=0.0, le=90.0, description="paper: Mean Shift radius")
 
     # Field validators run on given values only (not on defaults) and after the fields declared
-    # before them, so ``info.data`` holds the method, ``multi_frame`` and ``link_tracks``.
+    # before them, so ``info.data`` holds the method, ``multi_frame`` and ``link_tracks``. A value
+    # equal to the default changes nothing and passes: a client may send every option.
     @field_validator(*ML_ONLY)
     @classmethod
     def _ml_only(cls, value: Any, info: ValidationInfo) -> Any:
-        if info.data.get("method") == "paper":
+        if info.data.get("method") == "paper" and _changed(cls, value, info):
             raise _not_applicable("to method 'paper' (an option of method 'ml')")
         return value
 
     @field_validator(*PAPER_ONLY)
     @classmethod
     def _paper_only(cls, value: Any, info: ValidationInfo) -> Any:
-        if info.data.get("method", "paper") != "paper":
+        if info.data.get("method", "paper") != "paper" and _changed(cls, value, info):
             raise _not_applicable(f"to method '{info.data['method']}' (an option of method 'paper')")
         return value
 
@@ -90,6 +96,6 @@ class EstimateOptions(BaseModel):
     @classmethod
     def _switched_on(cls, value: Any, info: ValidationInfo) -> Any:
         switch, why = SWITCHED_BY[str(info.field_name)]
-        if info.data.get("method") == "ml" and info.data.get(switch) is False:
+        if info.data.get("method") == "ml" and info.data.get(switch) is False and _changed(cls, value, info):
             raise _not_applicable(why)
         return value

@@ -51,9 +51,10 @@ def estimate_file(
 def write_outputs(
     inp: BearingsInput, result: dict[str, Any], *, out: Path | None, report: Path | None, title: str
 ) -> None:
-    """Write the result JSON to ``out`` and the report to ``report`` (either may be None), all
-    or nothing: both texts are made first, then written beside their targets and renamed into
-    place, so a report that fails (to render, or on a full disk) leaves no result behind it.
+    """Write the result JSON to ``out`` and the report to ``report`` (either may be None): both
+    texts are made first, then written beside their targets and renamed into place, so a report
+    that fails (to render, or on a full disk) leaves no result behind it. Only a rename failing
+    after the first succeeded (the second target's directory lost meanwhile) leaves one of them.
     The directories must exist (the CLI checks them before the work); none is created. An
     ``OSError`` names the target that failed (``filename``), not the temporary file."""
     texts: list[tuple[Path, str]] = []

@@ -92,7 +92,7 @@ def _estimate(
     input_file: Path, method: str, gate_chi2: float | None, tracks: bool, out: Path | None, report: Path | None
 ) -> dict[str, Any]:
     """Check the options, the output paths and the input file before any work (so a refusal
-    has written nothing), then estimate and write the outputs all or nothing."""
+    has written nothing), then estimate and write the outputs, both made before either is written."""
     from pydantic import ValidationError
 
     from ..bearings.options import EstimateOptions
@@ -111,8 +111,6 @@ def _estimate(
         name = str(e["loc"][0]) if e["loc"] else "options"
         raise InvalidOptionError(f"{FLAGS.get(name, name)}: {e['msg']}", field=name) from None
     check_output_files(out=out, report=report)
-    if out is not None and report is not None and out.resolve() == report.resolve():
-        raise InputError(f"--report: {report} is also the --out file; give two names", field="report")
     if input_file.is_dir():
         raise InputError(f"{input_file} is a directory, not a file", field="input")
     if not input_file.exists():

@@ -60,8 +60,10 @@ def input_errors(fn: F) -> F:
 
 def check_output_files(**paths: Path | None) -> None:
     """Output files (keyword: the option's name, ``report_html`` for ``--report-html``) checked
-    before any work: each one's directory exists and it is not a directory itself. A command
-    refused here has written nothing; one refused after its work may have written a first output."""
+    before any work: each one's directory exists, it is not a directory itself and no two are one
+    file. A command refused here has written nothing; one refused after its work may have
+    written a first output."""
+    seen: dict[Path, str] = {}
     for name, path in paths.items():
         if path is None:
             continue
@@ -70,6 +72,9 @@ def check_output_files(**paths: Path | None) -> None:
             raise InputError(f"{option}: {path} is a directory; give a file name", field=name)
         if not path.parent.is_dir():
             raise InputError(f"{option}: the directory {path.parent} does not exist", field=name)
+        # One output written over another would lose the first.
+        if (other := seen.setdefault(path.resolve(), option)) != option:
+            raise InputError(f"{other} and {option} are the same file ({path}); give two names", field=name)
 
 
 def first_error(exc: Any) -> str:

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from ..linescan.pipeline import Outcome
     from ..linescan.result import MotionResult
     from ..linescan.sensor import SensorNoise
+    from ..target.motion import Motion
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="linescan-motion: spin and precession from line-scan lidar."
@@ -155,11 +156,13 @@ def estimate(
     cloud given with tracks) are also rectified to the reference time."""
     from ..linescan.options import FramesOptions, TracksOptions
     from ..linescan.pipeline import estimate_frames, estimate_tracks, input_form
+    from ..linescan.truth import load_truth
 
     # Options that would do nothing, and outputs with nowhere to go, are refused before the work.
     if truth is not None and report is None:
         raise InputError("--truth goes with --report (the report shows the truth beside the estimate)", field="truth")
     check_output_files(report=report, rectified=rectified)
+    truth_motion = load_truth(truth) if truth is not None else None
     form = input_form(input_file)
     common: dict[str, Any] = {"model": model, "reference_time_s": reference_time_s, "seed": seed}
     if form == "frames":
@@ -184,7 +187,7 @@ def estimate(
         with json_stdout(as_json):
             outcome = estimate_tracks(input_file, tracks_options, cloud_path=cloud)
         out = rectified or (cloud.with_name(cloud.stem + "-rectified.ply") if cloud is not None else None)
-    _write_outputs(outcome, input_file, out, report, truth)
+    _write_outputs(outcome, input_file, out, report, truth_motion)
     _print_result(outcome.result, as_json=as_json)
 
 
@@ -220,7 +223,7 @@ def _declared_noise(path: Path) -> SensorNoise | None:
     return read_tracks(path).sensor
 
 
-def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Path | None, truth: Path | None) -> None:
+def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Path | None, truth: Motion | None) -> None:
     """The rectified cloud and the report, as the job writes them."""
     from ..io.ply import write_ply
 
@@ -231,7 +234,6 @@ def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Pat
     if report is None:
         return
     from ..linescan.report import ReportInputs, build_report
-    from ..linescan.truth import load_truth
 
     inputs = ReportInputs(
         result=outcome.result,
@@ -239,7 +241,7 @@ def _write_outputs(outcome: Outcome, source: Path, out: Path | None, report: Pat
         tracks=outcome.tracks,
         distorted=outcome.cloud,
         rectified=rectified,
-        truth=load_truth(truth) if truth is not None else None,
+        truth=truth,
     )
     report.write_text(build_report(inputs), encoding="utf-8")
     typer.echo(f"wrote {report}", err=True)

@@ -74,8 +74,6 @@ def estimate(
     if truth is not None and report is None:  # the truth is only ever drawn into the report
         raise InputError("--truth goes with --report (the truth is shown in the HTML report only)", field="truth")
     check_output_files(out=out, report=report)
-    if out is not None and report is not None and out.resolve() == report.resolve():
-        raise InputError(f"--out and --report are the same file ({out})", field="report")
     truth_doc = None
     if truth is not None:
         from ..panel_axis.report import load_truth

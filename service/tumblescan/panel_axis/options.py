@@ -33,7 +33,8 @@ class EstimateOptions(BaseModel):
     @field_validator("weak_snr")
     @classmethod
     def _weak_snr_needs_ours(cls, v: float, info: ValidationInfo) -> float:
-        if info.data.get("method") == "paper":  # set explicitly: the default is not in the input
+        # Given, and not the default (a client may send every option; the default changes nothing).
+        if info.data.get("method") == "paper" and v != cls.model_fields["weak_snr"].default:
             raise PydanticCustomError(
                 "option_not_applicable",
                 "does not apply to method 'paper' (it has no sigma, so no perspective SNR to compare)",
