@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..report.numbers import sigma_decimals
+
 MAX_LINES = 10
 
 
@@ -15,12 +17,9 @@ def plural(n: int, word: str, words: str | None = None) -> str:
 
 
 def decimals(sigma_m: list[float]) -> int:
-    """Decimals that show the smallest sigma to two significant digits (0 to 6): a position
-    printed finer than its sigma is noise, and coarser hides what the sigma says."""
+    """Decimals that show the smallest sigma to two significant digits (0 to 6)."""
     finite = [s for s in sigma_m if math.isfinite(s) and s > 0]
-    if not finite:
-        return 1
-    return min(6, max(0, 1 - math.floor(math.log10(min(finite)))))
+    return sigma_decimals(min(finite) if finite else None, default=1)
 
 
 def vector_text(v: list[float], sigma_m: list[float]) -> str:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..report import figure_html, page, table_html
+from ..report.numbers import sigma_decimals
 from .result import MarkerPoseResult
 
 
@@ -130,7 +131,7 @@ def _two_digits(x: float) -> str:
     """Two significant digits without an exponent (a sigma: 0.021, 1.3, 17, 240)."""
     if not np.isfinite(x) or x <= 0:
         return f"{x:g}"
-    return f"{x:.{max(0, 1 - int(np.floor(np.log10(x))))}f}"
+    return f"{x:.{sigma_decimals(x)}f}"
 
 
 def _detection_html(result: MarkerPoseResult) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from ..report.numbers import sigma_decimals
 from .result import Axis, Candidate, PanelAxisResult
 
 PAPER = "paper method"  # the only one without σ
@@ -22,9 +23,7 @@ def with_sigma(value: float, sigma: float | None, unit: str = "deg", *, why: str
 
 def decimals(sigma: float) -> int:
     """Decimals that show σ to 2 significant digits (0 to 6; 3 for a σ of 0)."""
-    if sigma <= 0:
-        return 3
-    return min(6, max(0, 1 - math.floor(math.log10(sigma))))
+    return sigma_decimals(sigma, default=3)
 
 
 def sigma_text(sigma: float | None, unit: str = "deg", *, why: str = PAPER) -> str:

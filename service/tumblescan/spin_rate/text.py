@@ -5,25 +5,16 @@ paper's method, and the report "mirror twin None")."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
+from ..report.numbers import sigma_decimals
 from .estimate import SENSE_MIN_FROM_PLANE_DEG
-
-
-def decimals_for(sigma: float | None, default: int = 4) -> int:
-    """Decimals that show ``sigma`` with 2 significant digits (0.0213 -> 3, 2.05 -> 1, 120 -> 0)."""
-    if sigma is None or not math.isfinite(sigma) or sigma <= 0:
-        return default
-    return int(min(max(1 - math.floor(math.log10(sigma)), 0), 8))
 
 
 def with_sigma(value: float, sigma: float | None, unit: str) -> str:
     """``value ± sigma unit``, both rounded to the σ's second significant digit."""
-    d = decimals_for(sigma)
-    if sigma is None:
-        return f"{value:.{d}f} {unit}"
-    return f"{value:.{d}f} ± {sigma:.{d}f} {unit}"
+    d = sigma_decimals(sigma, default=4, most=8)
+    return f"{value:.{d}f} {unit}" if sigma is None else f"{value:.{d}f} ± {sigma:.{d}f} {unit}"
 
 
 def vector_text(v: list[float]) -> str:
@@ -59,7 +50,9 @@ def _axis_rows(result: dict[str, Any]) -> list[tuple[str, str]]:
             return [("axis, sense", "n/a (the paper's sine fit gives the rate only)")]
         return [] if not s["spinning"] else [("axis, sense", "n/a")]
     sigma = s["sigma_axis_deg"]
-    axis = vector_text(s["axis_camera"]) + ("" if sigma is None else f" ± {sigma:.{decimals_for(sigma, 1)}f} deg")
+    axis = vector_text(s["axis_camera"]) + (
+        "" if sigma is None else f" ± {sigma:.{sigma_decimals(sigma, default=1, most=8)}f} deg"
+    )
     rows = [("axis (camera)", axis)]
     if s["axis_los_angle_deg"] is not None:
         rows.append(("axis from the line of sight", f"{s['axis_los_angle_deg']:.1f} deg"))
@@ -77,6 +70,6 @@ def _axis_rows(result: dict[str, Any]) -> list[tuple[str, str]]:
             rows.append(("mirror twin (fits as well)", f"{vector_text(c['axis_camera'])} (cost ratio {c['cost']:.3g})"))
     rivals = [c["rate_deg_s"] for c in s["axis_candidates"] if c["kind"] == "rate" and c["rate_deg_s"] is not None]
     if rivals:
-        d = decimals_for(s["sigma_rate_deg_s"])
+        d = sigma_decimals(s["sigma_rate_deg_s"], default=4, most=8)
         rows.append(("rival rates (not ruled out)", ", ".join(f"{r:.{d}f}" for r in rivals) + " deg/s"))
     return rows
