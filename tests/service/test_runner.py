@@ -243,3 +243,38 @@ def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(
     finally:
         signal.signal(signal.SIGTERM, original)
     assert seen == [True]
+
+
+def test_stored_options_a_newer_version_refuses_fail_the_job_as_invalid_options(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A job queued before an upgrade made an option stricter: the caller's to change, not our fault.
+    from tumblescan.bearings.options import EstimateOptions
+
+    try:
+        EstimateOptions.model_validate({"method": "paper", "gate_chi2": 1.0})
+    except ValueError as exc:
+        refused = exc
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(refused))
+    assert runner.run_job(rt, job_id) == "failed"
+    job = rt.store.get(job_id)
+    assert job is not None and job.error_code == "invalid_options"
+    assert job.error_message is not None and job.error_message.startswith("options.gate_chi2: ")
+
+
+def test_a_result_model_that_fails_its_validation_is_still_our_fault(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pydantic import BaseModel
+
+    class Result(BaseModel):
+        n: int
+
+    try:
+        Result.model_validate({"n": "many"})
+    except ValueError as exc:
+        broken = exc
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(broken))
+    assert runner.run_job(rt, job_id) == "failed"
+    job = rt.store.get(job_id)
+    assert job is not None and job.error_code == "internal_error"

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
+from pydantic import ValidationError
 from sqlalchemy.exc import OperationalError
 
 from ..errors import InputError
@@ -137,6 +138,15 @@ def run_job(rt: Runtime, job_id: str) -> str | None:
         return _cancelled(rt, job_id, attempt)
     except InputError as exc:
         return _failed(rt, job_id, attempt, exc.code, str(exc))
+    except ValidationError as exc:
+        if not exc.title.endswith("Options"):  # a result or an internal model: our fault
+            log.exception("job %s failed", job_id)
+            return _failed(rt, job_id, attempt, "internal_error", f"{type(exc).__name__}: {exc}")
+        # Stored options this version refuses (a job queued before an upgrade made them stricter):
+        # the caller's to change, as they would have been told at submission.
+        e = exc.errors(include_url=False)[0]
+        where = ".".join(map(str, ("options", *e["loc"])))
+        return _failed(rt, job_id, attempt, "invalid_options", f"{where}: {e['msg']}")
     except OperationalError:
         # The store went away at a write that cannot be skipped; the lease lapses and the reaper
         # runs the job again once the store is back, instead of the job ending as our fault.
