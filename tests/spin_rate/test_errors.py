@@ -206,6 +206,13 @@ def test_a_utc_epoch_is_accepted(los_seq: Path, epoch: str | None) -> None:
     assert parse_meta(_meta_text(los_seq, "epoch_utc", epoch)).epoch_utc == epoch
 
 
+def test_a_whole_image_size_written_as_a_float_is_accepted(los_seq: Path) -> None:
+    # As panel-axis takes it (one camera block for both): some writers put 512.0 for 512.
+    meta = json.loads((los_seq / "meta.json").read_text())
+    width = meta["camera"]["width_px"]
+    assert parse_meta(_meta_text(los_seq, "camera.width_px", float(width))).camera.width_px == width
+
+
 def test_an_exposure_up_to_the_frame_interval_is_accepted(los_seq: Path) -> None:
     meta = json.loads((los_seq / "meta.json").read_text())
     gap = min(b["t_s"] - a["t_s"] for a, b in itertools.pairwise(meta["frames"]))

@@ -4,13 +4,29 @@ side (``width_px`` and ``height_px`` are redeclared there with the bound)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+import json
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict
+from pydantic_core import PydanticCustomError
 
 from ..errors import InputError
 from .camera import PinholeCamera
 from .image_io import MAX_PIXELS
+
+
+def _json_integer(value: Any) -> Any:
+    """An integer field of a kind's strict meta.json (``JsonInt``) takes a whole JSON number (640,
+    or 640.0 as some writers put it), never a bool or a string: strict mode would refuse 640.0
+    too, lax mode would take true as 1."""
+    if isinstance(value, bool | str):
+        raise PydanticCustomError(
+            "int_type", "an integer is expected (a JSON number), not {given}", {"given": json.dumps(value)}
+        )
+    return value
+
+
+JsonInt = Annotated[int, Strict(False), BeforeValidator(_json_integer)]
 
 
 class CameraMeta(BaseModel):

@@ -11,16 +11,16 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError
-from pydantic_core import PydanticCustomError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
 from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
+from ..imaging.camera_meta import JsonInt
 from ..imaging.image_io import MIN_SIDE_PX
 from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
@@ -28,19 +28,6 @@ from .frames import R_cam_from_enu
 INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
 # strict: no bool or string is coerced to a number (every numeric field, nested lists included).
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
-
-
-def _json_integer(value: Any) -> Any:
-    """An integer field takes a JSON number (640, or 640.0 as some writers put it), never a bool or
-    a string: strict mode would refuse 640.0 too, lax mode would take true as 1."""
-    if isinstance(value, bool | str):
-        raise PydanticCustomError(
-            "int_type", "an integer is expected (a JSON number), not {given}", {"given": json.dumps(value)}
-        )
-    return value
-
-
-JsonInt = Annotated[int, Strict(False), BeforeValidator(_json_integer)]
 
 
 class CameraMeta(SharedCameraMeta):

@@ -23,6 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
 from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
+from ..imaging.camera_meta import JsonInt
 from ..io.manifest import manifest_object, read_manifest
 
 INPUT_SCHEMA = "tumblescan.spin_from_images.input/1"
@@ -33,6 +34,7 @@ _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 _EXPECTED = {
     "float_type": "a JSON number",
     "int_type": "a JSON integer",
+    "int_from_float": "a JSON integer",
     "bool_type": "a JSON bool (true or false)",
     "string_type": "a JSON string",
     "list_type": "a JSON array",
@@ -51,8 +53,8 @@ class FrameMeta(BaseModel):
 class CameraMeta(SharedCameraMeta):
     model_config = _STRICT  # the shared block is lax: true would be a 1 px focal length
 
-    width_px: int = Field(ge=MIN_SIDE_PX)
-    height_px: int = Field(ge=MIN_SIDE_PX)
+    width_px: JsonInt = Field(ge=MIN_SIDE_PX)
+    height_px: JsonInt = Field(ge=MIN_SIDE_PX)
     pixel_origin: Literal["center_of_top_left_pixel"] = "center_of_top_left_pixel"
 
 
