@@ -245,36 +245,43 @@ def test_the_workers_shutdown_signal_is_noted_before_hueys_handler_runs(
     assert seen == [True]
 
 
-def test_stored_options_a_newer_version_refuses_fail_the_job_as_invalid_options(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # A job queued before an upgrade made an option stricter: the caller's to change, not our fault.
+def _refusal(model: type[Any], doc: dict[str, Any]) -> Exception:
+    try:
+        model.model_validate(doc)
+    except ValueError as exc:
+        return exc
+    raise AssertionError(f"{model.__name__} took {doc}")
+
+
+def _options_refusal() -> Exception:
     from tumblescan.bearings.options import EstimateOptions
 
-    try:
-        EstimateOptions.model_validate({"method": "paper", "gate_chi2": 1.0})
-    except ValueError as exc:
-        refused = exc
-    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(refused))
-    assert runner.run_job(rt, job_id) == "failed"
-    job = rt.store.get(job_id)
-    assert job is not None and job.error_code == "invalid_options"
-    assert job.error_message is not None and job.error_message.startswith("options.gate_chi2: ")
+    return _refusal(EstimateOptions, {"method": "paper", "gate_chi2": 1.0})
 
 
-def test_a_result_model_that_fails_its_validation_is_still_our_fault(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def _result_refusal() -> Exception:
     from pydantic import BaseModel
 
     class Result(BaseModel):
         n: int
 
-    try:
-        Result.model_validate({"n": "many"})
-    except ValueError as exc:
-        broken = exc
-    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(broken))
+    return _refusal(Result, {"n": "many"})
+
+
+@pytest.mark.parametrize(
+    ("refusal", "code", "message"),
+    [
+        # A job queued before an upgrade made an option stricter: the caller's to change.
+        (_options_refusal, "invalid_options", "options.gate_chi2: "),
+        # Any other model failing its validation is still our fault.
+        (_result_refusal, "internal_error", "ValidationError: "),
+    ],
+)
+def test_a_validation_error_is_the_callers_only_when_it_is_of_the_options(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, refusal: Callable[[], Exception], code: str, message: str
+) -> None:
+    rt, job_id = setup(tmp_path, monkeypatch, CountingKind(refusal()))
     assert runner.run_job(rt, job_id) == "failed"
     job = rt.store.get(job_id)
-    assert job is not None and job.error_code == "internal_error"
+    assert job is not None and job.error_code == code
+    assert job.error_message is not None and job.error_message.startswith(message)
