@@ -15,7 +15,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from ..errors import InputError, MalformedInputError
 from ..io.json_text import parse_json
 from ..jobs.artifacts import UploadTooLargeError
-from ..jobs.service import OptionsError, QueueUnavailableError
+from ..jobs.service import ArtifactMissingError, OptionsError, QueueUnavailableError
 
 RETRY_AFTER_S = "5"
 # FastAPI's answer when reading a JSON body raised something other than a JSONDecodeError
@@ -29,11 +29,6 @@ class WrongContentTypeError(InputError):
     """A body of another type than the endpoint takes (JSON to the upload, a form to the JSON)."""
 
     code = "wrong_content_type"
-
-
-class ArtifactMissingError(Exception):
-    """A succeeded job's file is no longer in the artifact store (removed by hand, or lost):
-    410, the file is gone for good; nothing is being stored."""
 
 
 def error_response(status: int, code: str, message: str, **extra: Any) -> JSONResponse:

@@ -25,6 +25,11 @@ class QueueUnavailableError(Exception):
     """The queue could not take the job; nothing was kept. Retry later."""
 
 
+class ArtifactMissingError(Exception):
+    """A succeeded job's file is no longer in the artifact store (removed by hand, or lost):
+    gone for good, and nothing is being stored (the API answers 410, not 507)."""
+
+
 class OptionsError(Exception):
     """Options failed validation; ``errors`` are pydantic's, each naming its option."""
 
@@ -138,17 +143,32 @@ class JobService:
         return job
 
     def report_path(self, job: Job) -> Path:
-        """The succeeded job's report, built and stored on first request."""
+        """The succeeded job's report, built and stored on first request; ``ArtifactMissingError``
+        naming the file it would be built from when that has gone from the store."""
         path = self.artifacts.path(job.id, REPORT_FILE)
-        if not path.exists():
-            finished = FinishedJob(
-                id=job.id,
-                result=job.result or {},
-                options=job.options,
-                inputs={k: self.artifacts.path(job.id, v) for k, v in job.input.items()},
-                artifacts={k: self.artifacts.path(job.id, v) for k, v in job.artifacts.items()},
-            )
+        if path.exists():
+            return path
+        for what, files in (("input", job.input), ("artifact", job.artifacts)):
+            for name, stored in files.items():
+                if not self.artifacts.path(job.id, stored).exists():
+                    raise ArtifactMissingError(
+                        f"job {job.id}'s report cannot be built: its {what} {name!r} ({Path(stored).name}) "
+                        "is no longer in the artifact store"
+                    )
+        finished = FinishedJob(
+            id=job.id,
+            result=job.result or {},
+            options=job.options,
+            inputs={k: self.artifacts.path(job.id, v) for k, v in job.input.items()},
+            artifacts={k: self.artifacts.path(job.id, v) for k, v in job.artifacts.items()},
+        )
+        try:
             self.artifacts.save_bytes(job.id, REPORT_FILE, get_kind(job.kind).report(finished).encode("utf-8"))
+        except FileNotFoundError as exc:  # gone while the report was being built
+            gone = Path(exc.filename).name if exc.filename else "a file it reads"
+            raise ArtifactMissingError(
+                f"job {job.id}'s report cannot be built: {gone} is no longer in the artifact store"
+            ) from None
         return path
 
     def queue_depth(self) -> int:

@@ -18,10 +18,10 @@ from ...io.json_text import parse_json
 from ...io.ply import read_ply
 from ...jobs.artifacts import safe_name
 from ...jobs.registry import get_kind
-from ...jobs.service import REPORT_FILE, JobService, Upload
+from ...jobs.service import REPORT_FILE, ArtifactMissingError, JobService, Upload
 from ...jobs.tables import FINAL, Job
 from ..deps import CallerDep, ServiceDep
-from ..errors import ArtifactMissingError, WrongContentTypeError
+from ..errors import WrongContentTypeError
 from ..schemas import (
     DEFAULT_KIND,
     REPORT_TEXT,
@@ -240,7 +240,7 @@ def get_job_report(job_id: str, service: ServiceDep, caller: CallerDep) -> FileR
     """The job's report: one self-contained HTML file that works offline (alias of
     ``/artifacts/report``), shown inline and saved as ``report.html``."""
     job = _succeeded(service.get(job_id, caller.scope), job_id, "its report exists")
-    path = report_path(service, job)
+    path = service.report_path(job)
     return FileResponse(path, media_type="text/html", filename=REPORT_FILE, content_disposition_type="inline")
 
 
@@ -276,26 +276,6 @@ def _download(service: JobService, job: Job, name: str, media_type: str, *, npz:
     if npz:
         return _as_npz(path, f"{name}.npz")
     return FileResponse(path, media_type=media_type, filename=_filename(name, stored))
-
-
-def report_path(service: JobService, job: Job) -> Path:
-    """The succeeded job's report, built on first request; 410 naming the file it would be
-    built from when that has gone from the store (nothing is being stored: not a 507)."""
-    if not service.artifacts.path(job.id, REPORT_FILE).is_file():
-        for what, files in (("input", job.input), ("artifact", job.artifacts)):
-            for name, stored in files.items():
-                if not service.artifacts.path(job.id, stored).exists():
-                    raise ArtifactMissingError(
-                        f"job {job.id}'s report cannot be built: its {what} {name!r} ({Path(stored).name}) "
-                        "is no longer in the artifact store"
-                    )
-    try:
-        return service.report_path(job)
-    except FileNotFoundError as exc:  # gone while the report was being built
-        gone = Path(exc.filename).name if exc.filename else "a file it reads"
-        raise ArtifactMissingError(
-            f"job {job.id}'s report cannot be built: {gone} is no longer in the artifact store"
-        ) from None
 
 
 def _as_npz(path: Path, filename: str) -> FileResponse:

@@ -8,10 +8,9 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
+from ...jobs.service import ArtifactMissingError
 from ...jobs.tables import FINAL, Job
 from ..deps import KEY_COOKIE, ServiceDep, get_caller, presented_key
-from ..errors import ArtifactMissingError
-from .jobs import report_path
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 PAGE_SIZE = 100
@@ -91,7 +90,7 @@ def job_page(job_id: str, request: Request, service: ServiceDep) -> Response:
         return page("Job not found", body, status_code=404)
     if job.status == "succeeded" and not job.artifacts_deleted:
         try:
-            return _remember_key(request, FileResponse(report_path(service, job), media_type="text/html"))
+            return _remember_key(request, FileResponse(service.report_path(job), media_type="text/html"))
         except ArtifactMissingError as exc:
             body = f"<h1>Report unavailable</h1><p>{html.escape(str(exc))}.</p><p><a href='/'>All jobs</a></p>"
             return page("Report unavailable", body, status_code=410)
