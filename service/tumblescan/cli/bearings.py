@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
-from .common import check_output_files, input_errors, json_stdout
+from .common import check_output_files, input_errors, json_stdout, options_from_flags
 
 app = typer.Typer(
     add_completion=False,
@@ -93,23 +93,16 @@ def _estimate(
 ) -> dict[str, Any]:
     """Check the options, the output paths and the input file before any work (so a refusal
     has written nothing), then estimate and write the outputs, both made before either is written."""
-    from pydantic import ValidationError
-
     from ..bearings.options import EstimateOptions
     from ..bearings.pipeline import estimate_file, write_outputs
-    from ..errors import InputError, InvalidOptionError
+    from ..errors import InputError
 
     # The options model is the one source of the bounds (NaN and Infinity included): a flag
     # not given is left out, so it is neither checked against the method nor stored as given.
     given: dict[str, Any] = {"method": method, "link_tracks": tracks}
     if gate_chi2 is not None:
         given["gate_chi2"] = gate_chi2
-    try:
-        options = EstimateOptions(**given)
-    except ValidationError as exc:
-        e = exc.errors(include_url=False)[0]
-        name = str(e["loc"][0]) if e["loc"] else "options"
-        raise InvalidOptionError(f"{FLAGS.get(name, name)}: {e['msg']}", field=name) from None
+    options = options_from_flags(EstimateOptions, given, flags=FLAGS)
     check_output_files(out=out, report=report)
     if input_file.is_dir():
         raise InputError(f"{input_file} is a directory, not a file", field="input")

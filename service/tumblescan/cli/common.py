@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import wraps
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import typer
 from typer.core import TyperGroup
@@ -18,9 +18,13 @@ try:  # typer 0.29 carries its own click; earlier ones use click's
 except ImportError:  # pragma: no cover
     from click.exceptions import ClickException, NoArgsIsHelpError, UsageError  # type: ignore[assignment]
 
-from ..errors import InputError
+from ..errors import InputError, InvalidOptionError
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 F = TypeVar("F", bound=Callable[..., Any])
+M = TypeVar("M", bound="BaseModel")
 
 
 def fail(message: str) -> typer.Exit:
@@ -75,6 +79,20 @@ def check_output_files(**paths: Path | None) -> None:
         # One output written over another would lose the first.
         if (other := seen.setdefault(path.resolve(), option)) != option:
             raise InputError(f"{other} and {option} are the same file ({path}); give two names", field=name)
+
+
+def options_from_flags(model: type[M], values: dict[str, Any], *, flags: dict[str, str] | None = None) -> M:
+    """``model`` validated from the flags' ``values``; a refusal names the flag (``flags``, else
+    ``--name``), not the field, so the user reads the option they typed."""
+    from pydantic import ValidationError
+
+    try:
+        return model.model_validate(values)
+    except ValidationError as exc:
+        e = exc.errors(include_url=False)[0]
+        name = str(e["loc"][0]) if e["loc"] else "options"
+        flag = (flags or {}).get(name, "--" + name.replace("_", "-"))
+        raise InvalidOptionError(f"{flag}: {e['msg']}", field=name) from None
 
 
 def first_error(exc: Any) -> str:

@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Annotated, Literal
 import typer
 
 from ..errors import InputError
-from .common import check_output_files, input_errors, json_stdout
+from .common import check_output_files, input_errors, json_stdout, options_from_flags
 
 if TYPE_CHECKING:
-    from ..panel_axis.options import EstimateOptions
+    pass
 
 app = typer.Typer(
     add_completion=False, no_args_is_help=True, help="panel-axis: a solar-panel axis from one optical image."
@@ -65,12 +65,13 @@ def estimate(
     truth: Annotated[Path | None, typer.Option(help="with --report: a simulation's truth.json")] = None,
 ) -> None:
     """Estimate the panel axis from meta.json and its image."""
+    # Everything that can be refused is refused before the work, so nothing is half-written:
+    # the options, where the outputs go, and the truth file.
+    from ..panel_axis.options import EstimateOptions
     from ..panel_axis.pipeline import load_input, run, write_result
     from ..panel_axis.summary import summary_lines
 
-    # Everything that can be refused is refused before the work, so nothing is half-written:
-    # the options, where the outputs go, and the truth file.
-    options = _options(method=method, require_axis=require_axis, seed=seed)
+    options = options_from_flags(EstimateOptions, {"method": method, "require_axis": require_axis, "seed": seed})
     if truth is not None and report is None:  # the truth is only ever drawn into the report
         raise InputError("--truth goes with --report (the truth is shown in the HTML report only)", field="truth")
     check_output_files(out=out, report=report)
@@ -97,18 +98,3 @@ def estimate(
         return
     for line in summary_lines(result):
         typer.echo(line)
-
-
-def _options(**values: object) -> EstimateOptions:
-    """The estimator's options from the flags; a refusal names the flag (``--require-axis``), not
-    the field."""
-    from pydantic import ValidationError
-
-    from ..panel_axis.options import EstimateOptions
-
-    try:
-        return EstimateOptions.model_validate(values)
-    except ValidationError as exc:
-        err = exc.errors(include_url=False)[0]
-        name = str(err["loc"][0]) if err["loc"] else "options"
-        raise InputError(f"--{name.replace('_', '-')}: {err['msg']}", field=name) from None
