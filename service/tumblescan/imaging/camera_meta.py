@@ -1,6 +1,7 @@
-"""The ``camera`` block of an optical kind's meta.json, validated at the door, and the
-:class:`PinholeCamera` it describes. Each kind subclasses it to set its own smallest image
-side (``width_px`` and ``height_px`` are redeclared there with the bound)."""
+"""The ``camera`` block of an optical kind's meta.json, validated at the door (strictly, as the
+kinds' other meta.json models: ``STRICT_META``), and the :class:`PinholeCamera` it describes.
+Each kind subclasses it to set its own smallest image side (``width_px`` and ``height_px`` are
+redeclared there with the bound)."""
 
 from __future__ import annotations
 
@@ -29,12 +30,17 @@ def _json_integer(value: Any) -> Any:
 JsonInt = Annotated[int, Strict(False), BeforeValidator(_json_integer)]
 
 
+# A kind's meta.json models: no unknown field, no NaN, and no bool or string taken as a number
+# (lax mode took "fx_px": true as a focal length of 1 px and gave a confident wrong answer).
+STRICT_META = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+
 class CameraMeta(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = STRICT_META
 
     model: Literal["pinhole"] = "pinhole"
-    width_px: int = Field(ge=1)
-    height_px: int = Field(ge=1)
+    width_px: JsonInt = Field(ge=1)
+    height_px: JsonInt = Field(ge=1)
     # Upper bounds only refuse the absurd (1e308 was accepted and the job failed far from the
     # cause): a 10 m focal length on 0.1 µm pixels is 1e8 px; OpenCV's coefficients stay far under 1e3.
     fx_px: float = Field(gt=0, le=1e8)

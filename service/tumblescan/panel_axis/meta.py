@@ -14,31 +14,27 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from .._typing import FloatArray
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..imaging.camera_meta import STRICT_META, JsonInt
 from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
-from ..imaging.camera_meta import JsonInt
 from ..imaging.image_io import MIN_SIDE_PX
 from ..io.manifest import manifest_object, read_manifest
 from .frames import R_cam_from_enu
 
 INPUT_SCHEMA = "tumblescan.panel_axis.input/1"
-# strict: no bool or string is coerced to a number (every numeric field, nested lists included).
-_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class CameraMeta(SharedCameraMeta):
-    model_config = _STRICT  # the shared block coerces "2400" and true to numbers; this kind does not
-
     width_px: JsonInt = Field(ge=MIN_SIDE_PX)
     height_px: JsonInt = Field(ge=MIN_SIDE_PX)
 
 
 class AnglePointing(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     frame: Literal["station_enu"] = "station_enu"
     azimuth_deg: float = Field(ge=-360, le=360)
@@ -47,14 +43,14 @@ class AnglePointing(BaseModel):
 
 
 class MatrixPointing(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     frame: Literal["station_enu", "ecef"]
     R_cam_from_ref: list[list[float]]
 
 
 class StationMeta(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     lat_deg: float = Field(ge=-90, le=90)
     lon_deg: float = Field(ge=-180, le=360)
@@ -62,7 +58,7 @@ class StationMeta(BaseModel):
 
 
 class PriorMeta(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     range_m: float | None = Field(None, gt=0, le=1e9)  # beyond GEO (3.6e7 m) and the Moon (3.8e8 m)
     panel_length_m: float | None = Field(None, gt=0, le=1e3)
@@ -74,7 +70,7 @@ class PanelAxisInput(BaseModel):
     """meta.json: the image's file name (relative to meta.json), the camera, and the optional
     pointing, station and panel prior."""
 
-    model_config = _STRICT
+    model_config = STRICT_META
 
     schema_: str = Field(alias="schema")
     image: str = "image.png"

@@ -18,18 +18,17 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from ..errors import InputError
 from ..imaging.camera import PinholeCamera
+from ..imaging.camera_meta import STRICT_META, JsonInt
 from ..imaging.camera_meta import CameraMeta as SharedCameraMeta
-from ..imaging.camera_meta import JsonInt
 from ..io.manifest import manifest_object, read_manifest
 
 INPUT_SCHEMA = "tumblescan.spin_from_images.input/1"
 MIN_FRAMES = 6
 MIN_SIDE_PX = 32
-_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 # What a strict type error expects, by pydantic's error type.
 _EXPECTED = {
     "float_type": "a JSON number",
@@ -44,22 +43,20 @@ _EXPECTED = {
 
 
 class FrameMeta(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     file: str = Field(min_length=1)
     t_s: float
 
 
 class CameraMeta(SharedCameraMeta):
-    model_config = _STRICT  # the shared block is lax: true would be a 1 px focal length
-
     width_px: JsonInt = Field(ge=MIN_SIDE_PX)
     height_px: JsonInt = Field(ge=MIN_SIDE_PX)
     pixel_origin: Literal["center_of_top_left_pixel"] = "center_of_top_left_pixel"
 
 
 class PriorMeta(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     motion: Literal["single_axis_spin"] = "single_axis_spin"
     max_rate_deg_s: float | None = Field(None, gt=0)
@@ -68,7 +65,7 @@ class PriorMeta(BaseModel):
 
 
 class MetaOptions(BaseModel):
-    model_config = _STRICT
+    model_config = STRICT_META
 
     return_tracks: bool = False
 
@@ -76,7 +73,7 @@ class MetaOptions(BaseModel):
 class SpinInput(BaseModel):
     """meta.json: the frames (file relative to meta.json, mid-exposure time), the camera and the prior."""
 
-    model_config = _STRICT
+    model_config = STRICT_META
 
     schema_: str = Field(alias="schema")
     frames: list[FrameMeta]
