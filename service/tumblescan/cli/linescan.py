@@ -280,6 +280,7 @@ def rectify(
 ) -> None:
     """Map every point of a cloud to one reference time with an estimated motion."""
     from ..io.ply import TimedCloud, read_ply, write_ply
+    from ..linescan.options import check_reference_time
     from ..linescan.rectify import rectify as rectify_points
 
     _finite(reference_time_s=reference_time_s)
@@ -288,14 +289,9 @@ def rectify(
     cloud = read_ply(cloud_file)
     t_first, t_last = (float(cloud.t_s.min()), float(cloud.t_s.max())) if len(cloud) else (0.0, 0.0)
     target = t_first if reference_time_s is None else reference_time_s
-    # As for an estimate's reference time: a far one turns the motion's phase into noise.
-    reach_s = max(t_last - t_first, 1.0)
-    if not t_first - reach_s <= target <= t_last + reach_s:
-        raise InputError(
-            f"--reference-time-s: {target:g} s lies too far from the cloud's times ({t_first:g} to {t_last:g} s): "
-            f"keep it within {reach_s:g} s of them",
-            field="reference_time_s",
-        )
+    # The rule of an estimate's reference time: a far one turns the motion's phase into noise.
+    check_reference_time(target, t_first, t_last, named="--reference-time-s:", whose="the cloud's times",
+                         field="reference_time_s")  # fmt: skip
     xyz = rectify_points(cloud.xyz_m, cloud.t_s, result.motion(), to_time_s=target)
     write_ply(out, TimedCloud(xyz, cloud.t_s, cloud.fields))
     typer.echo(f"wrote {out}: {len(cloud)} points rectified to t={target} s")

@@ -65,14 +65,24 @@ class CommonOptions(BaseModel):
         """
         if self.reference_time_s is None:
             return t_first_s
-        reach_s = max(t_last_s - t_first_s, 1.0)
-        if not t_first_s - reach_s <= self.reference_time_s <= t_last_s + reach_s:
-            raise InvalidOptionError(
-                f"options.reference_time_s = {self.reference_time_s:g} s lies too far from the observations "
-                f"({t_first_s:g} to {t_last_s:g} s): keep it within {reach_s:g} s of them",
-                field="options.reference_time_s",
-            )
+        check_reference_time(
+            self.reference_time_s, t_first_s, t_last_s, named="options.reference_time_s =",
+            whose="the observations", field="options.reference_time_s",
+        )  # fmt: skip
         return self.reference_time_s
+
+
+def check_reference_time(T_s: float, t_first_s: float, t_last_s: float, *, named: str, whose: str, field: str) -> None:
+    """A reference time ``T_s`` within the times' span (at least 1 s) of ``t_first_s`` ..
+    ``t_last_s``, or ``InvalidOptionError`` saying so (``named``: how the message names it,
+    ``whose``: the times): the phase of a far T loses the digits a fit or a rectified point needs."""
+    reach_s = max(t_last_s - t_first_s, 1.0)
+    if not t_first_s - reach_s <= T_s <= t_last_s + reach_s:
+        raise InvalidOptionError(
+            f"{named} {T_s:g} s lies too far from {whose} ({t_first_s:g} to {t_last_s:g} s): "
+            f"keep it within {reach_s:g} s of them",
+            field=field,
+        )
 
 
 class TracksOptions(CommonOptions):
