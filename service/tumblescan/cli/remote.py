@@ -99,10 +99,16 @@ def _check_outputs(wait: bool, timeout: float, out: Path | None, artifacts: Path
     for flag, given in (("--out", out), ("--artifacts", artifacts)):
         if given is not None and not wait:
             raise fail(f"{flag} needs --wait (the files exist once the job has succeeded)")
-    if out is not None and (out.is_dir() or not out.parent.is_dir()):
-        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
+    if out is not None:
+        _check_out(out)
     if artifacts is not None and artifacts.exists() and not artifacts.is_dir():
         raise fail(f"--artifacts {artifacts}: exists and is not a directory")
+
+
+def _check_out(out: Path) -> None:
+    """A download's target: not a directory, in one that exists."""
+    if out.is_dir() or not out.parent.is_dir():
+        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
 
 
 def _client(url: str | None, api_key: str | None) -> Any:
@@ -215,8 +221,7 @@ def report(
     """Save a finished job's HTML report (self-contained, works offline)."""
     from tumblescan_client import TumblescanError
 
-    if out.is_dir() or not out.parent.is_dir():  # before the download, which may be megabytes
-        raise fail(f"--out {out}: " + ("is a directory" if out.is_dir() else f"no such directory {out.parent}"))
+    _check_out(out)  # before the download, which may be megabytes
     client = _client(url, api_key)
     try:
         with client:
