@@ -33,7 +33,7 @@ def bootstrap_layout(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple
         # the grown ones that turn out to slide over the body now that the poses are better, then
         # the tracks that are new markers.
         refined = _refine(data, assoc.R, assoc.t, assoc.obs_marker, layout)
-        keep = ~_sliding_markers(data, assoc.R, assoc.t, assoc.measured, assoc.obs_marker, len(layout), gates)
+        keep = ~_sliding_markers(data, assoc, len(layout), gates)
         grown = _grow(data, assoc.R, assoc.t, assoc.measured, assoc.obs_status, refined[keep], gates)
         moved = float(np.max(np.linalg.norm(refined - layout, axis=1)))
         layout = grown
@@ -41,7 +41,7 @@ def bootstrap_layout(data: MarkerInput, gates: Gates) -> tuple[FloatArray, tuple
             break
     else:  # the rounds ran out: the last round's new markers are checked for sliding all the same
         assoc = associate(data, layout, gates)
-        layout = layout[~_sliding_markers(data, assoc.R, assoc.t, assoc.measured, assoc.obs_marker, len(layout), gates)]
+        layout = layout[~_sliding_markers(data, assoc, len(layout), gates)]
     return layout, gauge
 
 
@@ -156,24 +156,16 @@ def _grow(
     return np.array(new)
 
 
-def _sliding_markers(
-    data: MarkerInput,
-    R: FloatArray,
-    t: FloatArray,
-    measured: np.ndarray,
-    obs_marker: np.ndarray,
-    M: int,
-    gates: Gates,
-) -> np.ndarray:
+def _sliding_markers(data: MarkerInput, assoc: Association, M: int, gates: Gates) -> np.ndarray:
     """(M,) bool: the grown markers (not the seed's three, which hold the gauge) most of whose
     observations come from tracks that slide over the body. A glint can be grown on the first
     round's poses (from the seed's three markers, noisy enough to hide its slide); a later round's
     poses show it."""
-    use = (obs_marker >= 3) & measured[data.obs_frame]
-    idx = np.flatnonzero(use)
-    sliding = np.zeros(M)
+    R, t, obs_marker = assoc.R, assoc.t, assoc.obs_marker
+    idx = np.flatnonzero((obs_marker >= 3) & assoc.measured[data.obs_frame])
     if not len(idx):
         return np.zeros(M, dtype=bool)
+    sliding = np.zeros(M)
     # Group the observations by (marker, track).
     order = idx[np.lexsort((data.obs_track[idx], obs_marker[idx]))]
     key = obs_marker[order].astype(np.int64) * (int(data.obs_track.max()) + 1) + data.obs_track[order]
